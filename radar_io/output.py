@@ -38,17 +38,21 @@ class MeasurementWriter:
             self._empty = "null"
             self._template = "{" + ",".join(f'"{c}":%s' for c in self.columns) + "}"
 
+    #: rows formatted at a time (bounds the memory of the text being built)
+    ROWS_PER_WRITE = 8192
+
     def write(self, batch: MeasurementBatch) -> None:
-        if not len(batch):
-            return
-        cols = [_column_text(batch[c], self._empty) for c in self.columns]
-        if self.fmt == "csv":
-            text = "\n".join(map(",".join, zip(*cols)))
-        else:
-            tpl = self._template
-            text = "\n".join(tpl % row for row in zip(*cols))
-        self.out.write(text + "\n")
-        self.rows += len(batch)
+        n = len(batch)
+        for s in range(0, n, self.ROWS_PER_WRITE):
+            e = min(n, s + self.ROWS_PER_WRITE)
+            cols = [_column_text(batch[c][s:e], self._empty) for c in self.columns]
+            if self.fmt == "csv":
+                text = "\n".join(map(",".join, zip(*cols)))
+            else:
+                tpl = self._template
+                text = "\n".join(tpl % row for row in zip(*cols))
+            self.out.write(text + "\n")
+        self.rows += n
 
 
 class Progress:

@@ -140,3 +140,34 @@ def test_monitor_shows_a_live_line():
     out = r.stdout.decode()
     assert r.returncode == 0, r.stderr
     assert "SEQ" in out and "fr/s" in out and "crc 0" in out
+
+
+PEAK_RSS = """
+import resource, sys
+from radar_io.cli import main
+rc = main(["decode", sys.argv[1], "-o", "/dev/null", "-q"])
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
+sys.exit(rc)
+"""
+
+
+def test_decode_streams_in_constant_memory(tmp_path, spec):
+    """Peak RSS does not grow with the recording: 10× the frames, about the same memory."""
+    from radar_io.recording import RecordingWriter
+    from radar_io.simulator import RadarSimulator, SimConfig
+
+    peaks = {}
+    for n_blocks in (4, 40):
+        p = tmp_path / f"r{n_blocks}.rdrlog"
+        sim = RadarSimulator(config=SimConfig(seed=2, loop=True))
+        with RecordingWriter(p, spec) as w:
+            for _ in range(n_blocks):  # 25 000 frames (600 kB) per block
+                data, _ = sim.generate(25_000)
+                for k in range(0, len(data), 4800):
+                    w.write(data[k:k + 4800])
+        r = subprocess.run([sys.executable, "-c", PEAK_RSS, str(p)], capture_output=True,
+                           text=True, cwd=ROOT, timeout=300)
+        assert r.returncode == 0, r.stderr
+        peaks[n_blocks] = int(r.stdout.split()[-1])
+    # 24 MB of input and ~1 M rows more must not cost more than a few MB more
+    assert peaks[40] - peaks[4] < 30, peaks
