@@ -111,19 +111,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from .simulator import FlightScript, RadarSimulator, SimConfig
     from .sources import open_port
 
-    script = FlightScript(start_x_m=args.start_x_m, start_y_m=args.start_y_m,
-                          height_m=args.height_m, course_deg=args.course_deg,
-                          speed_mps=args.speed_mps, length_m=args.length_m)
+    script = FlightScript(**{k: getattr(args, k) for k in FlightScript.__dataclass_fields__
+                             if getattr(args, k) is not None})
     cfg = SimConfig(rate_hz=args.rate_hz, seed=args.seed, ng_per_min=args.ng_per_min,
                     sync_every_s=args.sync_every_s, go_delay_s=args.go_delay_s,
                     flip_rate=args.flip_rate, drop_rate=args.drop_rate,
                     insert_rate=args.insert_rate, loop=args.duration_s is not None)
-    for name in ("rate_hz", "speed_mps"):
-        if getattr(args, name) <= 0:
+    for name in ("rate_hz", "speed_mps", "length_m"):
+        if getattr(args, name) is not None and getattr(args, name) <= 0:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive")
     sim = RadarSimulator(script, cfg, _load_common(args)["spec"])
     target = args.output
-    is_port = "://" in target or target.startswith("/dev/")
+    is_port = "://" in target or _is_tty(target)
     realtime = args.realtime if args.realtime is not None else is_port
     write: Any
     if target == "-":
@@ -164,6 +163,18 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print(f"\rsimulate: {sim.state.frame_index} frames in {time.monotonic() - t0:.1f} s"
               f" to {target}; corruption {sim.state.counts}", file=sys.stderr)
     return 0
+
+
+def _is_tty(path: str) -> bool:
+    """True for a terminal device (a serial port, a pty), False for files, /dev/null, pipes."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        return os.isatty(fd)
+    finally:
+        os.close(fd)
 
 
 # ---------------------------------------------------------------- monitor
@@ -224,6 +235,34 @@ def _monitor_line(m: dict[str, Any], st: dict[str, int], rate: float) -> str:
             f"  crc {st['crc_errors']} gaps {st['seq_gaps']} junk {st['bytes_discarded']} B")
 
 
+# ---------------------------------------------------------------- serve
+def cmd_serve(args: argparse.Namespace) -> int:
+    import logging
+
+    import uvicorn
+
+    from .service.app import create_app
+    from .service.config import load_config
+
+    cfg = load_config(args.config, {
+        "source": args.source, "host": args.host, "port": args.port, "site": args.site,
+        "calibration": args.calibration, "data_dir": args.data_dir,
+        "auto_record": args.auto_record, "token_file": args.token_file})
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    app = create_app(cfg)
+    svc = app.state.service
+    print(f"radar-io serve: source {cfg.source}, dashboard http://{cfg.host}:{cfg.port}/ "
+          f"(API docs /docs), data in {svc.data_dir.resolve()}, control "
+          f"{'enabled' if svc.token else 'disabled (no token configured)'}", file=sys.stderr)
+    try:
+        # per-message deflate would compress every measurement once per client: off
+        uvicorn.run(app, host=cfg.host, port=int(cfg.port), log_level="warning",
+                    ws_ping_interval=20, ws_per_message_deflate=False)
+    except OSError as exc:  # e.g. address already in use
+        raise ConfigError(f"cannot serve on {cfg.host}:{cfg.port}: {exc.strerror}") from None
+    return 0
+
+
 # ---------------------------------------------------------------- bench
 def cmd_bench(args: argparse.Namespace) -> int:
     from .bench import run_bench
@@ -260,12 +299,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="'-' (stdout, default), a file, a .rdrlog or a serial URL/device")
     p.add_argument("--duration-s", type=float, help="seconds to simulate (default: one approach)")
     p.add_argument("--rate-hz", type=float, default=1000.0)
-    p.add_argument("--start-x-m", type=float, default=-13753.0, help="start north of the radar")
-    p.add_argument("--start-y-m", type=float, default=6070.0, help="start east of the radar")
-    p.add_argument("--height-m", type=float, default=600.0, help="height above the antenna")
-    p.add_argument("--course-deg", type=float, default=340.0, help="true course")
-    p.add_argument("--speed-mps", type=float, default=70.0)
-    p.add_argument("--length-m", type=float, default=15000.0, help="flight length")
+    p.add_argument("--start-x-m", type=float, help="start, metres north of the radar")
+    p.add_argument("--start-y-m", type=float, help="start, metres east of the radar")
+    p.add_argument("--height-m", type=float, help="height above the antenna (default 600)")
+    p.add_argument("--course-deg", type=float, help="true course (default 340)")
+    p.add_argument("--speed-mps", type=float, help="ground speed (default 70)")
+    p.add_argument("--length-m", type=float, help="flight length (default 15000)")
     p.add_argument("--sync-every-s", type=float, default=5.0, help="camera shutter period")
     p.add_argument("--ng-per-min", type=float, default=2.0, help="NG dropouts per minute")
     p.add_argument("--go-delay-s", type=float, default=1.0)
@@ -287,6 +326,24 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration-s", type=float, help="stop after this many seconds")
     _add_common(p)
     p.set_defaults(func=cmd_monitor)
+
+    p = sub.add_parser("serve", help="the live service: REST, websocket and the dashboard",
+                       description="Acquire from a source, record, and serve the API and the "
+                       "operator dashboard. With no arguments: the built-in simulator on "
+                       "http://127.0.0.1:8000/.")
+    p.add_argument("--config", metavar="CONFIG.toml", help="service config (see deploy/)")
+    p.add_argument("--source", help="sim:// (default), a serial device or pyserial URL, "
+                   "replay://PATH.rdrlog?speed=1")
+    p.add_argument("--host", help="bind address (default 127.0.0.1)")
+    p.add_argument("--port", type=int, help="TCP port (default 8000)")
+    p.add_argument("--site", help="site TOML (sim:// defaults to the demo site)")
+    p.add_argument("--calibration", help="calibration set JSON to apply at start")
+    p.add_argument("--data-dir", help="recordings and calibration sets (default ./radar-data)")
+    p.add_argument("--auto-record", choices=("go", "manual", "always"),
+                   help="record per GO period (default), only on request, or always")
+    p.add_argument("--token-file", help="file holding the control token "
+                   "(or set RADAR_IO_TOKEN; no token = control disabled)")
+    p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("bench", help="throughput benchmarks",
                        description="Frames/s of the per-frame and batch paths and a memcpy "

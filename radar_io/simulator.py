@@ -26,10 +26,14 @@ from .spec import FrameSpec, load_spec
 
 @dataclass
 class FlightScript:
-    """A straight flight at constant height in the radar frame (X north, Y east, H up; m, deg)."""
+    """A straight flight at constant height in the radar frame (X north, Y east, H up; m, deg).
 
-    start_x_m: float = -13753.0
-    start_y_m: float = 6070.0
+    The default is a 15 km approach along the demo site's runway heading (340 deg)
+    ending over its touchdown point, at 600 m above the antenna.
+    """
+
+    start_x_m: float = -14834.7
+    start_y_m: float = 4122.4
     height_m: float = 600.0
     course_deg: float = 340.0
     speed_mps: float = 70.0

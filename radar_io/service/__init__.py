@@ -1,0 +1,1 @@
+"""The live service: acquisition pipeline, websocket hub, REST API and the operator dashboard."""

@@ -1,0 +1,309 @@
+"""The FastAPI application: REST, websocket and the dashboard, around one acquisition pipeline."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import secrets
+from contextlib import asynccontextmanager
+from pathlib import Path
+from typing import Any
+
+from fastapi import Body, Depends, FastAPI, Header, HTTPException, Query, WebSocket
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, Field
+from starlette.websockets import WebSocketDisconnect
+
+from .. import __version__
+from ..calibration_set import Calibration, load_calibration, save_calibration, utc_now_iso
+from ..errors import ConfigError, RadarIOError
+from ..geometry import load_site
+from ..spec import load_spec
+from .acquisition import Acquisition
+from .config import TOKEN_ENV, ServiceConfig
+from .history import History
+from .hub import Hub
+from .recorder import Recorder
+from .replay import ReplayController
+
+WEB_DIR = Path(__file__).resolve().parent.parent / "web"
+_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
+
+
+class ReplayRequest(BaseModel):
+    recording: str = Field(description="recording id (file name without .rdrlog)")
+    speed: float = Field(1.0, ge=0.0, le=1000.0, description="× recorded pace; 0 = as fast as possible")
+
+
+class SeekRequest(BaseModel):
+    position_s: float = Field(ge=0.0, description="seconds from the recording's start")
+
+
+class StepRequest(BaseModel):
+    n: int = Field(1, ge=1, le=100000, description="recorded chunks to deliver")
+
+
+class SpeedRequest(BaseModel):
+    speed: float = Field(ge=0.0, le=1000.0)
+
+
+class Service:
+    """Everything the routes share."""
+
+    def __init__(self, cfg: ServiceConfig) -> None:
+        self.cfg = cfg
+        self.token = cfg.token()
+        self.data_dir = Path(cfg.data_dir)
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.spec = load_spec(cfg.spec) if cfg.spec else load_spec()
+        site_path = cfg.resolved_site()
+        self.site = load_site(site_path) if site_path else None
+        self.cal_dir = self.data_dir / "calibrations"
+        self.cal_dir.mkdir(exist_ok=True)
+        cal = Calibration()
+        if cfg.calibration:
+            cal = load_calibration(cfg.calibration)
+        elif (self.cal_dir / "active.json").exists():
+            cal = load_calibration(self.cal_dir / "active.json")
+        self.history = History(cfg.history_size)
+        self.hub = Hub(self.history, cfg.ws_queue_size)
+        self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
+                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s)
+        self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
+                               self.hub.publish_threadsafe, site=self.site, calibration=cal)
+        self.replay: ReplayController | None = None
+        self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
+
+    def recording_path(self, rec_id: str) -> Path:
+        if not _ID.match(rec_id) or ".." in rec_id:
+            raise HTTPException(400, f"invalid recording id {rec_id!r}")
+        base = self.recorder.dir.resolve()
+        p = (base / f"{rec_id}.rdrlog").resolve()
+        if p.parent != base:
+            raise HTTPException(400, "path outside the data directory refused")
+        if not p.is_file():
+            raise HTTPException(404, f"no recording {rec_id!r}")
+        return p
+
+    def status(self) -> dict[str, Any]:
+        st = self.acq.status()
+        st.update(self.hub.stats())
+        st["recording"] = self.recorder.current
+        st["auto_record"] = self.recorder.auto
+        st["calibration"] = self.acq.calibration.id
+        st["control_enabled"] = self.token is not None
+        st["replay"] = self.replay.state() if self.replay is not None and st["mode"] == "replay" \
+            else None
+        st["site"] = self.site.name if self.site else None
+        st["version"] = __version__
+        st["instance"] = self.instance
+        return st
+
+
+def create_app(cfg: ServiceConfig) -> FastAPI:
+    svc = Service(cfg)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
+        svc.hub.attach(asyncio.get_running_loop())
+        svc.acq.start()
+        try:
+            yield
+        finally:
+            svc.acq.stop()
+            svc.recorder.close()
+
+    app = FastAPI(title="radar_io", version=__version__, lifespan=lifespan,
+                  description="Live tracking-radar data, recordings, replay and calibration. "
+                  "Units: metres and degrees; field names carry their unit.")
+    app.state.service = svc
+
+    def require_token(authorization: str | None = Header(None)) -> None:
+        if svc.token is None:
+            raise HTTPException(403, f"control is disabled: no token configured (set {TOKEN_ENV} "
+                                "or token_file)")
+        if not authorization or not authorization.startswith("Bearer "):
+            raise HTTPException(401, "control needs 'Authorization: Bearer <token>'",
+                                headers={"WWW-Authenticate": "Bearer"})
+        if not secrets.compare_digest(authorization[7:].strip().encode(), svc.token.encode()):
+            raise HTTPException(403, "wrong token")
+
+    control = [Depends(require_token)]
+
+    @app.exception_handler(RadarIOError)
+    async def _radar_error(_req: Any, exc: RadarIOError) -> JSONResponse:
+        return JSONResponse({"detail": str(exc)}, status_code=422)
+
+    @app.get("/api/status", tags=["live"])
+    def status() -> dict[str, Any]:
+        """Source, link state, framer counters, rate, lamps, recording, websocket clients."""
+        return svc.status()
+
+    @app.get("/api/site", tags=["live"])
+    def site() -> dict[str, Any] | None:
+        """The radar site (WGS-84 position, runway frame), or null when none is configured."""
+        return svc.site.to_dict() if svc.site else None
+
+    @app.get("/api/track", tags=["live"])
+    def track(since: int | None = Query(None, ge=0, description="return messages after this msg_seq"),
+              limit: int = Query(1000, ge=1, le=20000)) -> dict[str, Any]:
+        """Recent measurements (decode columns + msg_seq + t_ns), oldest first."""
+        items = svc.history.since(since, limit) if since is not None else svc.history.latest(limit)
+        return {"messages": [m for _, m, _ in items], "last_msg_seq": svc.history.last_seq,
+                "first_msg_seq": svc.history.first_seq}
+
+    @app.websocket("/ws/live")
+    async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", ge=0),
+                      max_hz: float | None = Query(None, gt=0, le=1000)) -> None:
+        await ws.accept()
+        client = svc.hub.register(ws, max_hz)
+        sender = asyncio.create_task(client.run(svc.history, from_))
+        try:
+            while True:
+                recv = asyncio.create_task(ws.receive())
+                done, _ = await asyncio.wait({recv, sender}, return_when=asyncio.FIRST_COMPLETED)
+                if sender in done:
+                    recv.cancel()
+                    break
+                if recv.result().get("type") == "websocket.disconnect":
+                    break
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        finally:
+            svc.hub.unregister(client)
+            sender.cancel()
+
+    @app.get("/api/recordings", tags=["recordings"])
+    def recordings() -> list[dict[str, Any]]:
+        """Recordings in the data directory, newest first."""
+        out = []
+        for p in sorted(svc.recorder.dir.glob("*.rdrlog"), reverse=True):
+            st = p.stat()
+            out.append({"id": p.stem, "size_bytes": st.st_size, "modified_unix_s": st.st_mtime,
+                        "open": p.stem == svc.recorder.current,
+                        "download": f"/api/recordings/{p.stem}"})
+        return out
+
+    @app.get("/api/recordings/{rec_id}", tags=["recordings"])
+    def download(rec_id: str) -> FileResponse:
+        """The .rdrlog file itself."""
+        p = svc.recording_path(rec_id)
+        return FileResponse(p, media_type="application/octet-stream", filename=p.name)
+
+    @app.get("/api/sync-events", tags=["recordings"])
+    def sync_events(recording: str | None = None, limit: int = Query(1000, ge=1, le=100000)
+                    ) -> list[dict[str, Any]]:
+        """Sync (camera shutter) events: SYNC 0→1 edges with SEQ, TOD and receive time."""
+        if recording is not None:
+            p = svc.recording_path(recording).with_suffix(".sync.jsonl")
+            if not p.exists():
+                return []
+            import json
+
+            return [json.loads(line) for line in p.read_text().splitlines() if line][-limit:]
+        return [e.as_dict() for e in svc.recorder.sync_events[-limit:]]
+
+    @app.post("/api/recordings/start", tags=["control"], dependencies=control)
+    def rec_start() -> dict[str, Any]:
+        if svc.acq.mode != "live":
+            raise HTTPException(409, "cannot record while replaying")
+        return {"recording": svc.recorder.start("manual")}
+
+    @app.post("/api/recordings/stop", tags=["control"], dependencies=control)
+    def rec_stop() -> dict[str, Any]:
+        return {"closed": svc.recorder.stop()}
+
+    @app.post("/api/replay", tags=["control"], dependencies=control)
+    def replay_start(req: ReplayRequest) -> dict[str, Any]:
+        """Replay a recording through the live pipeline (the port is released meanwhile)."""
+        path = svc.recording_path(req.recording)
+        if req.recording == svc.recorder.current:
+            raise HTTPException(409, "that recording is still being written")
+        try:
+            ctl = ReplayController(path, req.speed)
+        except RadarIOError as exc:
+            raise HTTPException(422, str(exc)) from None
+        svc.recorder.stop()
+        svc.replay = ctl
+        svc.acq.switch_source(ctl, "replay")
+        return ctl.state()
+
+    def _replay() -> ReplayController:
+        if svc.replay is None or svc.acq.mode != "replay":
+            raise HTTPException(409, "no replay running")
+        return svc.replay
+
+    @app.get("/api/replay", tags=["replay"])
+    def replay_state() -> dict[str, Any]:
+        return _replay().state()
+
+    @app.post("/api/replay/pause", tags=["control"], dependencies=control)
+    def replay_pause() -> dict[str, Any]:
+        r = _replay()
+        r.pause()
+        return r.state()
+
+    @app.post("/api/replay/resume", tags=["control"], dependencies=control)
+    def replay_resume() -> dict[str, Any]:
+        r = _replay()
+        r.resume()
+        return r.state()
+
+    @app.post("/api/replay/seek", tags=["control"], dependencies=control)
+    def replay_seek(req: SeekRequest) -> dict[str, Any]:
+        r = _replay()
+        r.seek(req.position_s)
+        return r.state()
+
+    @app.post("/api/replay/step", tags=["control"], dependencies=control)
+    def replay_step(req: StepRequest = Body(StepRequest())) -> dict[str, Any]:
+        r = _replay()
+        r.step(req.n)
+        return r.state()
+
+    @app.post("/api/replay/speed", tags=["control"], dependencies=control)
+    def replay_speed(req: SpeedRequest) -> dict[str, Any]:
+        r = _replay()
+        r.set_speed(req.speed)
+        return r.state()
+
+    @app.post("/api/replay/stop", tags=["control"], dependencies=control)
+    def replay_stop() -> dict[str, Any]:
+        """Back to the live source."""
+        _replay()
+        from ..sources import open_source
+
+        svc.acq.switch_source(open_source(svc.cfg.source), "live")
+        return {"mode": "live", "source": svc.cfg.source}
+
+    @app.get("/api/calibration", tags=["calibration"])
+    def get_calibration() -> dict[str, Any]:
+        return svc.acq.calibration.to_dict()
+
+    @app.put("/api/calibration", tags=["control"], dependencies=control)
+    def put_calibration(doc: dict[str, Any] = Body(..., examples=[{
+            "format": "radar_io-calibration/1", "id": "flight-7",
+            "biases": {"dsr_m": 3.1, "del_deg": -0.012, "daz_deg": 0.034}}])) -> dict[str, Any]:
+        """Apply a calibration set live (and keep it as the active set for restarts)."""
+        try:
+            cal = Calibration.from_dict(doc, source="request")
+        except ConfigError as exc:
+            raise HTTPException(422, str(exc)) from None
+        if not cal.created_utc:
+            cal = Calibration(**{**cal.__dict__, "created_utc": utc_now_iso()})
+        if not _ID.match(cal.id):
+            raise HTTPException(422, f"calibration id {cal.id!r} must be a plain name")
+        save_calibration(cal, svc.cal_dir / f"{cal.id}.json")
+        save_calibration(cal, svc.cal_dir / "active.json")
+        svc.acq.set_calibration(cal)
+        return cal.to_dict()
+
+    app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
+
+    @app.get("/", include_in_schema=False)
+    def index() -> FileResponse:
+        return FileResponse(WEB_DIR / "index.html", headers={"Cache-Control": "no-cache"})
+
+    return app
+

@@ -1,0 +1,83 @@
+"""Service configuration: a TOML file, overridden by command-line options.
+
+The control token comes from the environment variable ``RADAR_IO_TOKEN`` or
+from the file named by ``token_file``; there is never a default token. With no
+token configured the control endpoints are disabled and say so.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from ..errors import ConfigError
+from ..spec import spec_dir
+
+TOKEN_ENV = "RADAR_IO_TOKEN"
+
+
+@dataclass
+class ServiceConfig:
+    source: str = "sim://"
+    host: str = "127.0.0.1"
+    port: int = 8000
+    site: str | None = None          #: site TOML; sim:// defaults to the demo site
+    calibration: str | None = None   #: calibration set JSON applied at start
+    data_dir: str = "radar-data"     #: recordings, sync indices, calibration sets
+    token_file: str | None = None
+    auto_record: str = "go"          #: go | manual | always
+    preroll_s: float = 2.0
+    history_size: int = 120_000      #: messages kept for /api/track and ws resume (2 min at 1 kHz)
+    ws_queue_size: int = 5000        #: per websocket client, oldest dropped beyond
+    spec: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def resolved_site(self) -> str | None:
+        if self.site:
+            return self.site
+        if self.source.startswith("sim:"):
+            return str(spec_dir() / "sites" / "demo.toml")
+        return None
+
+    def token(self) -> str | None:
+        """The control token, or None (control disabled)."""
+        tok = os.environ.get(TOKEN_ENV)
+        if tok:
+            return tok.strip() or None
+        if self.token_file:
+            try:
+                tok = Path(self.token_file).read_text(encoding="utf-8").strip()
+            except OSError as exc:
+                raise ConfigError(f"cannot read token file {self.token_file}: {exc.strerror}") from None
+            if not tok:
+                raise ConfigError(f"token file {self.token_file} is empty")
+            return tok
+        return None
+
+
+def load_config(path: str | None, overrides: dict[str, Any]) -> ServiceConfig:
+    """Config from a TOML file (optional) with non-None overrides applied."""
+    doc: dict[str, Any] = {}
+    if path:
+        try:
+            doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"config file not found: {path}") from None
+        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"cannot read config file {path}: {exc}") from None
+    known = {f.name for f in fields(ServiceConfig)} - {"extra"}
+    unknown = set(doc) - known
+    if unknown:
+        raise ConfigError(f"config file {path}: unknown key(s) {', '.join(sorted(unknown))}")
+    cfg = ServiceConfig(**doc)
+    for k, v in overrides.items():
+        if v is not None:
+            setattr(cfg, k, v)
+    if cfg.auto_record not in ("go", "manual", "always"):
+        raise ConfigError("auto_record must be go, manual or always")
+    if not 0 < int(cfg.port) < 65536:
+        raise ConfigError(f"port {cfg.port} is out of range")
+    return cfg

@@ -1,0 +1,244 @@
+// radar_io operator dashboard: websocket live stream (decimated, resumable), status polling,
+// plan and profile views on canvas, lamps, readouts, servo-error bars, replay controls.
+"use strict";
+
+const MAX_POINTS = 20000;
+const STALE_S = 1.0;
+const S = (window.radarState = {
+  points: [],            // {x, y, h, g, sync}
+  lastMsgSeq: null,      // resume point for ws ?from=
+  instance: null,        // server instance: a change means the server restarted
+  lastMsgAt: 0,          // performance.now() of the last message
+  last: null,            // last message
+  status: null,
+  site: null,
+  ws: null,
+  connected: false,
+  reconnects: 0,
+  received: 0,
+  stale: false,
+  dirty: true,
+});
+
+const $ = (id) => document.getElementById(id);
+const fmt = (v, d) => (v === null || v === undefined || Number.isNaN(v) ? "—" : Number(v).toFixed(d));
+
+// ---------------------------------------------------------------- websocket
+let backoff = 500;
+async function connect() {
+  try {
+    const st = await (await fetch("/api/status", { cache: "no-store" })).json();
+    if (S.instance !== null && st.instance !== S.instance) S.lastMsgSeq = null; // new server run
+    S.instance = st.instance;
+  } catch (e) {
+    return retry();
+  }
+  const proto = location.protocol === "https:" ? "wss" : "ws";
+  let url = `${proto}://${location.host}/ws/live?max_hz=25`;
+  if (S.lastMsgSeq !== null) url += `&from=${S.lastMsgSeq}`;
+  const ws = new WebSocket(url);
+  S.ws = ws;
+  ws.onopen = () => { S.connected = true; backoff = 500; S.dirty = true; };
+  ws.onmessage = (ev) => {
+    const m = JSON.parse(ev.data);
+    if (S.lastMsgSeq !== null && m.msg_seq <= S.lastMsgSeq) return; // duplicate after resume
+    S.lastMsgSeq = m.msg_seq;
+    S.lastMsgAt = performance.now();
+    S.received++;
+    S.last = m;
+    if (m.rx_good && m.x_m !== null) {
+      S.points.push({ x: m.x_m, y: m.y_m, h: m.h_m, g: Math.hypot(m.x_m, m.y_m), sync: m.sync });
+      if (S.points.length > MAX_POINTS) S.points.splice(0, S.points.length - MAX_POINTS);
+    }
+    S.dirty = true;
+  };
+  ws.onclose = () => {
+    if (S.ws === ws) { S.connected = false; S.dirty = true; S.reconnects++; retry(); }
+  };
+  ws.onerror = () => ws.close();
+}
+function retry() {
+  setTimeout(connect, backoff);
+  backoff = Math.min(backoff * 2, 5000);
+}
+
+// ---------------------------------------------------------------- status polling
+async function poll() {
+  try {
+    const st = await (await fetch("/api/status", { cache: "no-store" })).json();
+    S.status = st;
+    if (S.instance !== null && st.instance !== S.instance && S.ws) S.ws.close(); // restarted
+    if (!S.site && st.site) S.site = await (await fetch("/api/site")).json();
+  } catch (e) {
+    S.status = null;
+  }
+  S.dirty = true;
+}
+
+// ---------------------------------------------------------------- drawing
+function niceStep(span) {
+  const raw = span / 5, p = Math.pow(10, Math.floor(Math.log10(raw)));
+  for (const k of [1, 2, 5, 10]) if (k * p >= raw) return k * p;
+  return 10 * p;
+}
+
+function referenceCourse() {
+  // runway frame (2-9, 2-10): Xr = x cos ψ + y sin ψ + Xr0, Yr = −x sin ψ + y cos ψ + Yr0
+  const s = S.site;
+  if (!s) return null;
+  const psi = (s.runway.heading_deg * Math.PI) / 180, c = Math.cos(psi), n = Math.sin(psi);
+  const toRadar = (xr, yr) => {
+    const a = xr - s.runway.radar_xr_m, b = yr - s.runway.radar_yr_m;
+    return { x: a * c - b * n, y: a * n + b * c };
+  };
+  return { from: toRadar(-20000, 0), td: toRadar(0, 0), to: toRadar(3000, 0) };
+}
+
+function drawPlan() {
+  const cv = $("plan"), g = cv.getContext("2d"), W = cv.width, H = cv.height;
+  g.clearRect(0, 0, W, H);
+  const pts = S.points, ref = referenceCourse();
+  let r = 5000;
+  for (let i = Math.max(0, pts.length - 5000); i < pts.length; i++) r = Math.max(r, Math.abs(pts[i].x), Math.abs(pts[i].y));
+  if (ref) r = Math.max(r, Math.abs(ref.td.x), Math.abs(ref.td.y));
+  r *= 1.1;
+  const k = (Math.min(W, H) / 2) / r, cx = W / 2, cy = H / 2;
+  const P = (x, y) => [cx + y * k, cy - x * k]; // north up, east right
+  g.strokeStyle = "#30363d"; g.fillStyle = "#7a8494"; g.font = "11px sans-serif"; g.lineWidth = 1;
+  const step = niceStep(r);
+  for (let rr = step; rr <= r * 1.5; rr += step) {
+    g.beginPath(); g.arc(cx, cy, rr * k, 0, 2 * Math.PI); g.stroke();
+    g.fillText(`${(rr / 1000).toFixed(rr < 1000 ? 1 : 0)} km`, cx + 3, cy - rr * k - 3);
+  }
+  g.beginPath(); g.moveTo(cx, 0); g.lineTo(cx, H); g.moveTo(0, cy); g.lineTo(W, cy); g.stroke();
+  g.fillText("N", cx + 4, 12); g.fillText("E", W - 12, cy - 4);
+  if (ref) {
+    g.strokeStyle = "#d29922"; g.setLineDash([8, 6]); g.beginPath();
+    g.moveTo(...P(ref.from.x, ref.from.y)); g.lineTo(...P(ref.to.x, ref.to.y)); g.stroke();
+    g.setLineDash([]); g.fillStyle = "#d29922"; const t = P(ref.td.x, ref.td.y); g.fillRect(t[0] - 3, t[1] - 3, 6, 6);
+  }
+  g.fillStyle = "#fff"; g.beginPath(); g.arc(cx, cy, 4, 0, 2 * Math.PI); g.fill();
+  g.strokeStyle = "#3b82f6"; g.lineWidth = 2; g.beginPath();
+  for (let i = 0; i < pts.length; i++) {
+    const p = P(pts[i].x, pts[i].y);
+    if (i === 0) g.moveTo(p[0], p[1]); else g.lineTo(p[0], p[1]);
+  }
+  g.stroke();
+  g.fillStyle = "#d29922";
+  for (const p of pts) if (p.sync) { const q = P(p.x, p.y); g.fillRect(q[0] - 2, q[1] - 2, 4, 4); }
+  if (pts.length) { const q = P(pts[pts.length - 1].x, pts[pts.length - 1].y); g.fillStyle = "#fff"; g.fillRect(q[0] - 4, q[1] - 4, 8, 8); }
+}
+
+function drawProfile() {
+  const cv = $("profile"), g = cv.getContext("2d"), W = cv.width, H = cv.height;
+  g.clearRect(0, 0, W, H);
+  const pts = S.points;
+  let gmax = 5000, hmax = 500;
+  for (const p of pts) { gmax = Math.max(gmax, p.g); hmax = Math.max(hmax, p.h); }
+  gmax *= 1.05; hmax *= 1.2;
+  const L = 40, B = 20, kx = (W - L - 8) / gmax, ky = (H - B - 8) / hmax;
+  const P = (gr, h) => [L + gr * kx, H - B - h * ky];
+  g.strokeStyle = "#30363d"; g.fillStyle = "#7a8494"; g.font = "11px sans-serif";
+  for (let v = 0; v <= gmax; v += niceStep(gmax)) { const p = P(v, 0); g.beginPath(); g.moveTo(p[0], 8); g.lineTo(p[0], H - B); g.stroke(); g.fillText(`${(v / 1000).toFixed(0)} km`, p[0] + 2, H - 6); }
+  for (let v = 0; v <= hmax; v += niceStep(hmax)) { const p = P(0, v); g.beginPath(); g.moveTo(L, p[1]); g.lineTo(W, p[1]); g.stroke(); g.fillText(`${v.toFixed(0)}`, 2, p[1] + 4); }
+  g.strokeStyle = "#3b82f6"; g.lineWidth = 2; g.beginPath();
+  pts.forEach((p, i) => { const q = P(p.g, p.h); if (i === 0) g.moveTo(q[0], q[1]); else g.lineTo(q[0], q[1]); });
+  g.stroke();
+}
+
+function setBar(id, v, fullScale) {
+  const el = $("b-" + id), val = $("v-" + id);
+  if (v === null || v === undefined) { el.style.width = "0"; val.textContent = "—"; return; }
+  const f = Math.max(-1, Math.min(1, v / fullScale));
+  el.style.left = f >= 0 ? "50%" : `${50 + f * 50}%`;
+  el.style.width = `${Math.abs(f) * 50}%`;
+  el.classList.toggle("sat", Math.abs(v) >= 0.98 * fullScale);
+  val.textContent = fmt(v, id === "dsr" ? 2 : 4);
+}
+
+function render() {
+  requestAnimationFrame(render);
+  const age = S.lastMsgAt ? (performance.now() - S.lastMsgAt) / 1000 : Infinity;
+  const st = S.status;
+  const srvAge = st && st.last_frame_age_s !== null ? st.last_frame_age_s : Infinity;
+  const stale = Math.min(age, srvAge) > STALE_S || (st && !st.connected) || !S.connected;
+  if (stale !== S.stale) { S.stale = stale; S.dirty = true; }
+  if (stale) $("stale-age").textContent = Number.isFinite(Math.min(age, srvAge)) ? Math.min(age, srvAge).toFixed(1) : "∞";
+  if (!S.dirty) return;
+  S.dirty = false;
+  $("stale").hidden = !stale;
+  document.body.classList.toggle("stale", stale);
+  const m = S.last;
+  for (const k of ["go", "rx_good", "sync", "auto"]) $("lamp-" + k).classList.toggle("on", !!(m && m[k]) && !stale);
+  if (m) {
+    const good = m.rx_good;
+    $("r-sr").textContent = fmt(good ? m.sr_c_m : m.sr_m, 1);
+    $("r-el").textContent = fmt(good ? m.el_c_deg : m.el_deg, 4);
+    $("r-az").textContent = fmt(good ? m.az_c_deg : m.az_deg, 4);
+    $("r-x").textContent = fmt(m.x_m, 1); $("r-y").textContent = fmt(m.y_m, 1); $("r-h").textContent = fmt(m.h_m, 1);
+    $("r-tod").textContent = fmt(m.tod_s, 3); $("r-seq").textContent = m.seq;
+    setBar("dsr", m.dsr_m, 50); setBar("del", m.del_deg, 1); setBar("daz", m.daz_deg, 1);
+  }
+  $("link").textContent = S.connected ? "ONLINE" : "OFFLINE";
+  $("link").className = "tag " + (S.connected ? "ok" : "bad");
+  if (st) {
+    $("mode").textContent = st.mode.toUpperCase();
+    $("source").textContent = st.source + (st.connected ? "" : ` (disconnected: ${st.last_error || "…"})`);
+    $("calib").textContent = `cal: ${st.calibration}`;
+    $("rec").className = "tag " + (st.recording ? "on" : "off");
+    $("rec").title = st.recording || "not recording";
+    $("c-rate").textContent = fmt(st.rate_hz, 0) + " Hz"; $("c-frames").textContent = st.frames;
+    $("c-crc").textContent = st.crc_errors; $("c-impl").textContent = st.implausible;
+    $("c-disc").textContent = st.bytes_discarded; $("c-gaps").textContent = st.seq_gaps;
+    $("c-ws").textContent = st.ws_clients; $("c-drop").textContent = st.ws_dropped;
+    $("c-reconn").textContent = st.reconnects;
+    const r = st.replay;
+    $("replay-state").textContent = r ? `${r.recording}: ${r.position_s.toFixed(1)} / ${r.duration_s.toFixed(1)} s ×${r.speed}${r.paused ? " paused" : ""}${r.finished ? " (end)" : ""}` : "";
+    if (r && document.activeElement !== $("seek")) $("seek").value = r.duration_s ? (100 * r.position_s) / r.duration_s : 0;
+  }
+  $("c-points").textContent = S.points.length;
+  drawPlan();
+  drawProfile();
+}
+
+// ---------------------------------------------------------------- control
+const token = $("token");
+token.value = localStorage.getItem("radar_io_token") || "";
+token.onchange = () => localStorage.setItem("radar_io_token", token.value);
+
+async function control(path, body, method = "POST") {
+  const res = await fetch(path, {
+    method, headers: { "Content-Type": "application/json", Authorization: `Bearer ${token.value}` },
+    body: body === undefined ? undefined : JSON.stringify(body),
+  });
+  const doc = await res.json().catch(() => ({}));
+  $("msg").textContent = res.ok ? "" : `${res.status}: ${typeof doc.detail === "string" ? doc.detail : JSON.stringify(doc.detail)}`;
+  poll(); listRecordings();
+  return doc;
+}
+async function listRecordings() {
+  try {
+    const list = await (await fetch("/api/recordings")).json(), sel = $("rec-list"), keep = sel.value;
+    sel.innerHTML = "";
+    for (const r of list) { const o = document.createElement("option"); o.value = r.id; o.textContent = `${r.id} (${(r.size_bytes / 1e6).toFixed(1)} MB)${r.open ? " ●" : ""}`; sel.appendChild(o); }
+    if (keep) sel.value = keep;
+  } catch (e) { /* offline */ }
+}
+$("rec-start").onclick = () => control("/api/recordings/start");
+$("rec-stop").onclick = () => control("/api/recordings/stop");
+$("replay").onclick = () => { S.points = []; control("/api/replay", { recording: $("rec-list").value, speed: Number($("speed").value) }); };
+$("pause").onclick = () => control("/api/replay/pause");
+$("resume").onclick = () => control("/api/replay/resume");
+$("step").onclick = () => control("/api/replay/step", { n: 1 });
+$("live").onclick = () => { S.points = []; control("/api/replay/stop"); };
+$("seek").onchange = () => {
+  const r = S.status && S.status.replay;
+  if (r) control("/api/replay/seek", { position_s: (Number($("seek").value) / 100) * r.duration_s });
+};
+
+connect();
+poll();
+listRecordings();
+setInterval(poll, 500);
+setInterval(listRecordings, 5000);
+requestAnimationFrame(render);
