@@ -123,12 +123,13 @@ async def _reader(url: str, out: list[tuple[int, int, dict[str, Any]]], n: int,
 async def _stalled(url: str, done: asyncio.Event, ready: asyncio.Event, counter: list[int]) -> None:
     import websockets
 
-    async with websockets.connect(url, max_size=None, max_queue=1) as ws:
-        # never read: the server's send buffer and this client's queue fill up
-        sock = ws.transport.get_extra_info("socket")
-        if sock is not None:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        ws.transport.pause_reading()
+    host, port = url.split("//", 1)[1].split("/", 1)[0].split(":")
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connect: a small window
+    sock.connect((host, int(port)))
+    async with websockets.connect(url, sock=sock, max_size=None, max_queue=1,
+                                  close_timeout=0.1) as ws:
+        ws.transport.pause_reading()  # never read: the server's buffers and queue fill up
         counter[0] += 1
         if counter[0] >= counter[1]:
             ready.set()
