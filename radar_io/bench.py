@@ -41,7 +41,8 @@ def corrupt_bytes(data: bytes, fraction: float, seed: int = 7) -> bytes:
 
 
 def run_bench(frames: int = 2_000_000, repeat: int = 5, per_frame_frames: int = 200_000,
-              include_plugins: bool = True) -> dict[str, Any]:
+              include_plugins: bool = True, serve_seconds: float = 5.0) -> dict[str, Any]:
+    """All figures; ``serve_seconds`` = 0 skips the live-service latency run."""
     spec = load_spec()
     sim = RadarSimulator(config=SimConfig(seed=11, tod_start_s=36000.0, loop=True), spec=spec)
     clean, _ = sim.generate(frames)
@@ -82,6 +83,10 @@ def run_bench(frames: int = 2_000_000, repeat: int = 5, per_frame_frames: int = 
         "batch_damaged_vs_memcpy": (n_clean / t_dam) / memcpy_fps,
         "per_frame_vs_memcpy": (per_frame_frames / t_pf) / memcpy_fps,
     }
+    if serve_seconds > 0:
+        from .service.loadtest import bench_service
+
+        res.update(bench_service(serve_seconds))
     if include_plugins and importlib.util.find_spec("radar_io.vision") is not None:
         try:
             from .vision.bench import bench_runway  # type: ignore[import-not-found]
