@@ -48,6 +48,25 @@ class SpeedRequest(BaseModel):
     speed: float = Field(ge=0.0, le=1000.0)
 
 
+class PhotoObservation(BaseModel):
+    """A photo position (from resection) at a sync event of a recording."""
+
+    group: str = Field(description="flight / group name for the per-group statistics")
+    recording: str = Field(description="recording id holding the sync event")
+    sync_index: int = Field(ge=0, description="0-based index of the SYNC 0→1 edge in the recording")
+    photo_x_m: float | None = Field(None, description="north of the radar (ground frame)")
+    photo_y_m: float | None = Field(None, description="east of the radar")
+    photo_z_m: float | None = Field(None, description="down (Z = −H)")
+    photo_sr_m: float | None = None
+    photo_el_deg: float | None = None
+    photo_az_deg: float | None = None
+
+
+class BiasRequest(BaseModel):
+    id: str = Field(description="id of the calibration set to propose")
+    observations: list[PhotoObservation] = Field(min_length=1)
+
+
 class Service:
     """Everything the routes share."""
 
@@ -298,6 +317,56 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         save_calibration(cal, svc.cal_dir / "active.json")
         svc.acq.set_calibration(cal)
         return cal.to_dict()
+
+    @app.post("/api/calibration/bias", tags=["control"], dependencies=control)
+    def estimate_bias(req: BiasRequest) -> dict[str, Any]:
+        """Pair photo positions with the radar's SR'/EL'/AZ' at the recorded sync events and
+        estimate ΔSR/ΔEL/ΔAZ (calibration.md §8). Nothing is applied: review the proposed
+        set, then PUT it to /api/calibration."""
+        import numpy as np
+
+        from ..calibration.bias import bias_calibration, bias_statistics, photo_to_radar
+        from ..calibration.sync_pairs import radar_at_sync_events
+
+        if not _ID.match(req.id):
+            raise HTTPException(422, f"calibration id {req.id!r} must be a plain name")
+        events: dict[str, list[dict[str, Any]]] = {}
+        pairs = []
+        for k, ob in enumerate(req.observations):
+            if ob.recording not in events:
+                events[ob.recording] = radar_at_sync_events(svc.recording_path(ob.recording),
+                                                            svc.spec)
+            evs = events[ob.recording]
+            if ob.sync_index >= len(evs):
+                raise HTTPException(422, f"observation {k}: recording {ob.recording} has "
+                                    f"{len(evs)} sync events, no index {ob.sync_index}")
+            ev = evs[ob.sync_index]
+            if not ev["rx_good"]:
+                raise HTTPException(422, f"observation {k}: the radar was NG at sync event "
+                                    f"{ob.sync_index} of {ob.recording}")
+            if None not in (ob.photo_x_m, ob.photo_y_m, ob.photo_z_m):
+                sr, el, az = (float(v) for v in photo_to_radar(
+                    np.array([ob.photo_x_m]), np.array([ob.photo_y_m]), np.array([ob.photo_z_m])))
+            elif None not in (ob.photo_sr_m, ob.photo_el_deg, ob.photo_az_deg):
+                sr, el, az = ob.photo_sr_m, ob.photo_el_deg, ob.photo_az_deg
+            else:
+                raise HTTPException(422, f"observation {k}: give photo_x_m/y_m/z_m or "
+                                    "photo_sr_m/el_deg/az_deg")
+            pairs.append({"group": ob.group, "recording": ob.recording,
+                          "sync_index": ob.sync_index, "seq": ev["seq"], "tod_s": ev["tod_s"],
+                          "radar_sr_m": ev["sr_m"], "radar_el_deg": ev["el_deg"],
+                          "radar_az_deg": ev["az_deg"], "photo_sr_m": sr, "photo_el_deg": el,
+                          "photo_az_deg": az})
+        stats = bias_statistics(
+            [p["group"] for p in pairs],
+            tuple(np.array([p[k] for p in pairs]) for k in ("photo_sr_m", "photo_el_deg",
+                                                             "photo_az_deg")),
+            tuple(np.array([p[k] for p in pairs]) for k in ("radar_sr_m", "radar_el_deg",
+                                                             "radar_az_deg")))
+        cal = bias_calibration(stats, cal_id=req.id, provenance={
+            "method": "calibration.md §8 via POST /api/calibration/bias",
+            "recordings": sorted(events), "pairs": len(pairs)})
+        return {"pairs": pairs, "statistics": stats, "calibration": cal.to_dict()}
 
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
 

@@ -47,7 +47,7 @@ async function connect() {
     S.received++;
     S.last = m;
     if (m.rx_good && m.x_m !== null) {
-      S.points.push({ x: m.x_m, y: m.y_m, h: m.h_m, g: Math.hypot(m.x_m, m.y_m), sync: m.sync });
+      S.points.push({ x: m.x_m, y: m.y_m, h: m.h_m, g: Math.hypot(m.x_m, m.y_m), sync: m.sync, s: m.msg_seq });
       if (S.points.length > MAX_POINTS) S.points.splice(0, S.points.length - MAX_POINTS);
     }
     S.dirty = true;
@@ -185,6 +185,7 @@ function render() {
     $("mode").textContent = st.mode.toUpperCase();
     $("source").textContent = st.source + (st.connected ? "" : ` (disconnected: ${st.last_error || "…"})`);
     $("calib").textContent = `cal: ${st.calibration}`;
+    $("cal-active").textContent = st.calibration;
     $("rec").className = "tag " + (st.recording ? "on" : "off");
     $("rec").title = st.recording || "not recording";
     $("c-rate").textContent = fmt(st.rate_hz, 0) + " Hz"; $("c-frames").textContent = st.frames;
@@ -234,6 +235,35 @@ $("live").onclick = () => { S.points = []; control("/api/replay/stop"); };
 $("seek").onchange = () => {
   const r = S.status && S.status.replay;
   if (r) control("/api/replay/seek", { position_s: (Number($("seek").value) / 100) * r.duration_s });
+};
+
+// ---------------------------------------------------------------- calibration
+let proposed = null;
+function parseObservations(text) {
+  const lines = text.trim().split(/\r?\n/).filter((l) => l.trim());
+  const head = lines.shift().split(",").map((h) => h.trim());
+  return lines.map((l) => {
+    const v = l.split(","), o = {};
+    head.forEach((h, i) => { o[h] = ["group", "recording"].includes(h) ? v[i].trim() : Number(v[i]); });
+    return o;
+  });
+}
+$("estimate").onclick = async () => {
+  let observations;
+  try { observations = parseObservations($("obs").value); } catch (e) { $("cal-result").textContent = "cannot read the table: " + e; return; }
+  const doc = await control("/api/calibration/bias", { id: $("cal-id").value || "photo", observations });
+  if (!doc.statistics) { $("cal-result").textContent = $("msg").textContent; $("apply").disabled = true; return; }
+  proposed = doc.calibration;
+  const f = (s) => `${s.mean.toFixed(4)} ± ${s.std.toFixed(4)}`, lines = [];
+  for (const [g, s] of [...Object.entries(doc.statistics.groups), ["combined", doc.statistics.combined]])
+    lines.push(`${g.padEnd(10)} n=${String(s.n).padEnd(3)} ΔSR ${f(s.dsr_m)} m  ΔEL ${f(s.del_deg)}°  ΔAZ ${f(s.daz_deg)}°`);
+  $("cal-result").textContent = lines.join("\n");
+  $("apply").disabled = false;
+};
+$("apply").onclick = async () => {
+  if (!proposed) return;
+  await control("/api/calibration", proposed, "PUT");
+  $("apply").disabled = true;
 };
 
 connect();

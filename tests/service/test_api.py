@@ -1,0 +1,265 @@
+"""REST, websocket resume, control with token, recordings, replay and calibration on a live service."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+import pytest
+import websockets
+
+from radar_io.recording import RecordingReader
+from radar_io.service.loadtest import ServeProcess
+
+from .test_live_pty import wait_for
+
+TOKEN = "s3cret-token"
+
+
+@pytest.fixture(scope="module")
+def svc(tmp_path_factory):
+    d = tmp_path_factory.mktemp("svc")
+    s = ServeProcess("sim://?go_delay_s=0.5&sync_every_s=1", d / "data",
+                     env={"RADAR_IO_TOKEN": TOKEN})
+    s.data = d / "data"
+    s.wait_ready()
+    yield s
+    s.stop()
+
+
+def call(svc, method: str, path: str, body=None, token: str | None = TOKEN) -> tuple[int, dict]:
+    headers = {"Content-Type": "application/json"}
+    if token is not None:
+        headers["Authorization"] = f"Bearer {token}"
+    data = json.dumps(body).encode() if body is not None else None
+    req = urllib.request.Request(svc.base + path, method=method, data=data, headers=headers)
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as e:
+        return e.code, json.loads(e.read() or b"null")
+
+
+def test_status_has_every_field(svc):
+    st = wait_for(lambda: (s := svc.get("/api/status"))["rate_hz"] > 900 and s, what="rate")
+    for k in ("source", "connected", "frames", "crc_errors", "bytes_discarded", "seq_gaps", "rate_hz",
+              "go", "rx_good", "last_frame_age_s", "recording", "ws_clients", "ws_dropped"):
+        assert k in st, k
+    assert st["source"].startswith("sim://") and st["connected"] and st["last_frame_age_s"] < 0.5
+
+
+@pytest.mark.parametrize("method,path,body", [
+    ("POST", "/api/recordings/start", None), ("POST", "/api/recordings/stop", None),
+    ("POST", "/api/replay", {"recording": "x", "speed": 1}), ("POST", "/api/replay/pause", None),
+    ("PUT", "/api/calibration", {"biases": {"dsr_m": 1}}),
+])
+def test_control_needs_the_token(svc, method, path, body):
+    code, doc = call(svc, method, path, body, token=None)
+    assert code == 401 and "Bearer" in doc["detail"]
+    code, doc = call(svc, method, path, body, token="wrong")
+    assert code == 403 and doc["detail"] == "wrong token"
+
+
+def test_control_disabled_without_a_configured_token(tmp_path):
+    s = ServeProcess("sim://", tmp_path / "d", env={"RADAR_IO_TOKEN": ""})
+    try:
+        s.wait_ready()
+        req = urllib.request.Request(s.base + "/api/recordings/start", method="POST",
+                                     headers={"Authorization": "Bearer anything"})
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(req, timeout=5)
+        assert e.value.code == 403 and "control is disabled" in json.loads(e.value.read())["detail"]
+        assert s.get("/api/status")["control_enabled"] is False
+    finally:
+        s.stop()
+
+
+def test_track_since_and_limit(svc):
+    doc = svc.get("/api/track?limit=50")
+    msgs = doc["messages"]
+    assert len(msgs) == 50
+    seqs = [m["msg_seq"] for m in msgs]
+    assert seqs == list(range(seqs[0], seqs[0] + 50))
+    later = wait_for(lambda: len(m := svc.get(f"/api/track?since={seqs[-1]}&limit=10")["messages"])
+                     == 10 and m, what="10 newer messages")
+    assert [m["msg_seq"] for m in later] == list(range(seqs[-1] + 1, seqs[-1] + 11))
+    assert {"sr_m", "x_m", "lat_deg", "xr_m", "t_ns"} <= set(msgs[0])
+
+
+def test_websocket_resume_backfills_every_message(svc):
+    async def main() -> list[int]:
+        url = f"ws://127.0.0.1:{svc.port}/ws/live"
+        async with websockets.connect(url) as ws:
+            first = [json.loads(await ws.recv())["msg_seq"] for _ in range(200)]
+        await asyncio.sleep(0.8)  # ~800 messages go by while we are away
+        async with websockets.connect(f"{url}?from={first[-1]}") as ws:
+            again = [json.loads(await ws.recv())["msg_seq"] for _ in range(3000)]
+        return first + again
+
+    seqs = asyncio.run(main())
+    assert seqs == list(range(seqs[0], seqs[0] + 3200))
+
+
+def test_decimated_stream(svc):
+    async def main() -> list[float]:
+        async with websockets.connect(f"ws://127.0.0.1:{svc.port}/ws/live?max_hz=20") as ws:
+            t = []
+            while len(t) < 21:
+                await ws.recv()
+                t.append(time.monotonic())
+            return t
+
+    t = asyncio.run(main())
+    assert 0.8 < t[-1] - t[0] < 1.6  # ~20 messages per second, not 1000
+
+
+def test_validation_errors_are_422_with_a_reason(svc):
+    code, doc = call(svc, "POST", "/api/replay", {"recording": "x", "speed": -4})
+    assert code == 422 and "speed" in json.dumps(doc)
+    code, doc = call(svc, "PUT", "/api/calibration", {"biases": {"dsr_m": "a lot"}})
+    assert code == 422 and "dsr_m" in doc["detail"]
+    code, _ = call(svc, "GET", "/api/track?limit=0")
+    assert code == 422
+
+
+def test_recordings_list_download_404_and_traversal(svc):
+    rec = wait_for(lambda: svc.get("/api/status")["recording"], what="GO-edge recording")
+    code, doc = call(svc, "POST", "/api/recordings/stop")
+    assert code == 200 and doc["closed"] == rec
+    lst = svc.get("/api/recordings")
+    assert rec in [r["id"] for r in lst]
+    with urllib.request.urlopen(f"{svc.base}/api/recordings/{rec}", timeout=10) as r:
+        body = r.read()
+    assert body == (svc.data / "recordings" / f"{rec}.rdrlog").read_bytes()
+    assert call(svc, "GET", "/api/recordings/nope")[0] == 404
+    for bad in ("..%2F..%2Fetc%2Fpasswd", "a..b", "%2Fetc%2Fpasswd"):
+        code, _ = call(svc, "GET", f"/api/recordings/{bad}")
+        assert code in (400, 404), bad
+    events = svc.get(f"/api/sync-events?recording={rec}")
+    assert events and all(e["recording"] == rec for e in events)
+    assert all(b["tod_s"] - a["tod_s"] == pytest.approx(1.0, abs=0.002)
+               for a, b in zip(events, events[1:]))
+
+
+def test_manual_recording_and_replay_controls(svc):
+    code, doc = call(svc, "POST", "/api/recordings/start")
+    assert code == 200
+    rec = doc["recording"]
+    time.sleep(1.5)
+    assert call(svc, "POST", "/api/recordings/stop")[1]["closed"] == rec
+    with RecordingReader(svc.data / "recordings" / f"{rec}.rdrlog") as r:
+        n_rec = sum(len(c.data) for c in r) // 24
+    code, st = call(svc, "POST", "/api/replay", {"recording": rec, "speed": 1.0})
+    assert code == 200 and st["recording"] == rec
+    wait_for(lambda: svc.get("/api/status")["mode"] == "replay", what="replay mode")
+    code, st = call(svc, "POST", "/api/replay/pause")
+    assert code == 200 and st["paused"]
+    time.sleep(0.3)
+    f0 = svc.get("/api/status")["frames"]
+    time.sleep(0.4)
+    assert svc.get("/api/status")["frames"] == f0  # paused: nothing flows
+    call(svc, "POST", "/api/replay/step", {"n": 3})
+    wait_for(lambda: svc.get("/api/status")["frames"] > f0, what="step")
+    code, st = call(svc, "POST", "/api/replay/seek", {"position_s": 0.0})
+    assert code == 200 and st["position_s"] == 0.0
+    call(svc, "POST", "/api/replay/speed", {"speed": 0})
+    call(svc, "POST", "/api/replay/resume")
+    st = wait_for(lambda: (s := svc.get("/api/status"))["replay"]["finished"] and s, what="end")
+    assert st["frames"] >= n_rec and st["recording"] is None  # replay is not recorded again
+    code, doc = call(svc, "POST", "/api/replay/stop")
+    assert code == 200
+    wait_for(lambda: (s := svc.get("/api/status"))["mode"] == "live" and s["connected"],
+             what="back to live")
+
+
+def test_put_calibration_applies_live(svc):
+    before = svc.get("/api/track?limit=20")["messages"]
+    code, doc = call(svc, "PUT", "/api/calibration",
+                     {"format": "radar_io-calibration/1", "id": "test-cal",
+                      "biases": {"dsr_m": 100.0, "del_deg": 0.0, "daz_deg": 0.0}})
+    assert code == 200 and doc["id"] == "test-cal"
+    assert svc.get("/api/status")["calibration"] == "test-cal"
+    time.sleep(0.2)
+    after = svc.get("/api/track?limit=200")["messages"]
+    good = [m for m in after if m["rx_good"]]
+    assert good and all(m["sr_c_m"] == pytest.approx(m["sr_m"] + m["dsr_m"] + 100.0) for m in good[-50:])
+    assert (svc.data / "calibrations" / "active.json").exists()
+    call(svc, "PUT", "/api/calibration", {"id": "zero", "biases": {}})
+    assert all(m["sr_c_m"] == pytest.approx(m["sr_m"] + m["dsr_m"]) for m in before if m["rx_good"])
+
+
+def test_openapi_docs(svc):
+    with urllib.request.urlopen(svc.base + "/docs", timeout=5) as r:
+        assert b"swagger" in r.read().lower()
+    api = svc.get("/openapi.json")
+    assert "/api/status" in api["paths"] and "/api/replay/seek" in api["paths"]
+
+
+def test_serve_with_no_arguments_is_the_readme_command(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "RADAR_IO_TOKEN"}
+    p = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "serve"], cwd=tmp_path, env=env,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        def status():
+            try:
+                with urllib.request.urlopen("http://127.0.0.1:8000/api/status", timeout=2) as r:
+                    return json.loads(r.read())
+            except OSError:
+                assert p.poll() is None, p.stderr.read().decode()
+                return None
+
+        st = wait_for(lambda: (s := status()) and s["frames"] > 0 and s, timeout_s=30,
+                      what="serve on 127.0.0.1:8000")
+        assert st["source"] == "sim://" and st["site"] == "demo"
+        with urllib.request.urlopen("http://127.0.0.1:8000/", timeout=5) as r:
+            assert b"radar_io" in r.read()
+        assert (tmp_path / "radar-data" / "recordings").is_dir()
+    finally:
+        p.terminate()
+        p.wait(10)
+
+
+def test_bias_from_photo_observations_at_recorded_sync_events(svc):
+    """Photo positions offset from the radar by known biases → those biases, then applied live."""
+    import numpy as np
+
+    from radar_io.decoding import decode_bytes
+
+    rec = call(svc, "POST", "/api/recordings/start")[1]["recording"]
+    time.sleep(3.6)  # sync every 1 s
+    assert call(svc, "POST", "/api/recordings/stop")[1]["closed"] == rec
+    with RecordingReader(svc.data / "recordings" / f"{rec}.rdrlog") as r:
+        b = decode_bytes(b"".join(c.data for c in r))
+    s = b["sync"].astype(int)
+    edges = np.flatnonzero((s[1:] == 1) & (s[:-1] == 0)) + 1
+    if s[0] == 1:
+        edges = np.concatenate(([0], edges))
+    edges = [i for i in edges if b["rx_good"][i]][:3]
+    assert len(edges) >= 2
+    obs = []
+    for k, i in enumerate(edges):
+        obs.append({"group": "f1" if k % 2 == 0 else "f2", "recording": rec, "sync_index": k,
+                    "photo_sr_m": float(b["sr_c_m"][i]) + 5.0,
+                    "photo_el_deg": float(b["el_c_deg"][i]) + 0.01,
+                    "photo_az_deg": float(b["az_c_deg"][i]) - 0.02})
+    code, doc = call(svc, "POST", "/api/calibration/bias", {"id": "photo-1", "observations": obs})
+    assert code == 200, doc
+    comb = doc["statistics"]["combined"]
+    assert comb["n"] == len(edges)
+    assert comb["dsr_m"]["mean"] == pytest.approx(5.0, abs=1e-9)
+    assert comb["del_deg"]["mean"] == pytest.approx(0.01, abs=1e-12)
+    assert comb["daz_deg"]["mean"] == pytest.approx(-0.02, abs=1e-9)
+    assert [p["seq"] for p in doc["pairs"]] == [int(b["seq"][i]) for i in edges]
+    assert svc.get("/api/status")["calibration"] != "photo-1"  # proposed, not applied
+    code, _ = call(svc, "PUT", "/api/calibration", doc["calibration"])
+    assert code == 200 and svc.get("/api/status")["calibration"] == "photo-1"
+    code, doc = call(svc, "POST", "/api/calibration/bias",
+                     {"id": "x", "observations": [{**obs[0], "sync_index": 999}]})
+    assert code == 422 and "no index 999" in doc["detail"]
+    call(svc, "PUT", "/api/calibration", {"id": "zero", "biases": {}})
