@@ -87,6 +87,33 @@ def construct_struct(spec: FrameSpec) -> cs.Construct:
     return cs.Struct(*parts).compile()
 
 
+def _compile_word_decoder(spec: FrameSpec) -> tuple[str, Any]:
+    """Python source (and function) turning construct's raw words into engineering values.
+
+    Generated from the spec, like construct's own compiler does for parsing: one line per
+    field and flag, with the masks, offsets and LSBs of the spec as literals. ``source``
+    is kept on the decoder for inspection.
+    """
+    lines = ["def decode_words(raw, m):"]
+    for f in spec.fields:
+        word = f"(raw[{f.name!r}] & {f.value_mask})"
+        half = 1 << (f.bits - 1)
+        if f.encoding == "twos_complement":
+            lines.append(f"    v = {word}")
+            word = f"(v - {half << 1} if v >= {half} else v)"
+        elif f.encoding == "offset_binary":
+            word = f"({word} - {half})"
+        lines.append(f"    m[{f.column!r}] = {word}" if f.unit in _INT_UNITS
+                     else f"    m[{f.column!r}] = {word} * {f.lsb!r}")
+    lines.append(f"    sts = raw[{spec.status_field!r}]")
+    for fl in spec.flags:
+        lines.append(f"    m[{fl.name!r}] = (sts & {fl.mask}) >> {fl.shift}")
+    src = "\n".join(lines) + "\n"
+    ns: dict[str, Any] = {}
+    exec(compile(src, f"<{spec.name} word decoder>", "exec"), ns)  # noqa: S102 - our own source
+    return src, ns["decode_words"]
+
+
 class FrameDecoder:
     """Per-frame decoder: ``decode(frame_bytes) -> dict`` of column → value."""
 
@@ -102,30 +129,15 @@ class FrameDecoder:
         self._ctx = cs.Container(_params={}, _root=None, _parsing=True, _building=False,
                                  _sizing=False, _subcons=None, _io=None, _index=None)
         self._ctx["_"] = self._ctx
-        enc = {"unsigned": 0, "twos_complement": 1, "offset_binary": 2}
-        self._fields = [(f.name, f.column, f.value_mask, enc[f.encoding], 1 << (f.bits - 1),
-                         f.lsb, f.unit in _INT_UNITS) for f in spec.fields]
-        self._flags = [(f.name, f.mask, f.shift) for f in spec.flags]
         self._sts = spec.status_field
         self.columns = output_columns(spec, site)
         self._template = dict.fromkeys(self.columns)
-        self._position_columns = [c for c in POSITION_COLUMNS if c in self._template]
+        self.source, self._decode_words = _compile_word_decoder(spec)
 
     def decode(self, frame: bytes) -> dict[str, Any]:
         """Decode one accepted frame (CRC already checked by the framer)."""
-        raw = self._parse(io.BytesIO(frame), self._ctx)
         m = self._template.copy()
-        for name, column, mask, enc, half, lsb, as_int in self._fields:
-            v = raw[name] & mask
-            if enc == 1:
-                if v >= half:
-                    v -= half << 1
-            elif enc == 2:
-                v -= half
-            m[column] = v if as_int else v * lsb
-        sts = raw[self._sts]
-        for name, mask, shift in self._flags:
-            m[name] = (sts & mask) >> shift
+        self._decode_words(self._parse(io.BytesIO(frame), self._ctx), m)
         if m["rx_good"]:
             self._position(m)
         return m
