@@ -122,7 +122,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive")
     sim = RadarSimulator(script, cfg, _load_common(args)["spec"])
     target = args.output
-    is_port = "://" in target or _is_tty(target)
+    is_port = "://" in target or _is_tty(target.split("?", 1)[0])
     realtime = args.realtime if args.realtime is not None else is_port
     write: Any
     if target == "-":
@@ -267,7 +267,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from .bench import run_bench
 
-    result = run_bench(frames=args.frames, repeat=args.repeat, include_plugins=not args.core_only)
+    result = run_bench(frames=args.frames, repeat=args.repeat, include_plugins=not args.core_only,
+                       serve_seconds=0.0 if args.core_only else args.serve_seconds)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -351,7 +352,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--frames", type=int, default=2_000_000, help="frames in the batch test stream")
     p.add_argument("--repeat", type=int, default=5, help="best of N runs")
-    p.add_argument("--core-only", action="store_true", help="skip the plug-in benchmarks")
+    p.add_argument("--serve-seconds", type=float, default=5.0,
+                   help="length of the live-service latency run: 1 kHz frames written into a "
+                   "pty, 20 websocket clients (one never reading); 0 to skip")
+    p.add_argument("--core-only", action="store_true",
+                   help="only the decoding paths (no service latency, no plug-in benchmarks)")
     p.set_defaults(func=cmd_bench)
 
     for name in PLUGIN_MODULES:
