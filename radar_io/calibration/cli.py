@@ -12,6 +12,8 @@ import math
 import sys
 from typing import Any
 
+from ..argtypes import finite_float as _finite_float
+from ..argtypes import positive_float as _positive_float
 from .errors import CalibrationInputError
 
 
@@ -28,26 +30,6 @@ def _floats(n: int, what: str):
         return values
 
     return parse
-
-
-def _positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
-    return v
-
-
-def _finite_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}")
-    return v
 
 
 def _int_at_least(low: int):
