@@ -14,7 +14,7 @@ from typing import Any, NoReturn
 from .errors import ConfigError, RadarIOError
 
 #: modules that contribute sub-commands through ``add_subparser(subparsers)``
-PLUGIN_MODULES = ("radar_io.calibration.cli", "radar_io.vision.cli")
+PLUGIN_MODULES = ("radar_io.calibration.cli", "radar_io.vision.cli", "radar_io.airborne.cli")
 
 
 class Parser(argparse.ArgumentParser):
@@ -46,6 +46,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
 # ---------------------------------------------------------------- decode
 def cmd_decode(args: argparse.Namespace) -> int:
     from .decoding import iter_decode
+    from .guidance import add_deviation
     from .output import MeasurementWriter, Progress
     from .recording import ReadReport, iter_payloads
 
@@ -69,12 +70,19 @@ def cmd_decode(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise ConfigError(f"cannot write {args.output}: {exc.strerror}") from None
     stats: dict[str, int] = {}
+    path, tlm, da = _guidance_outputs(args)
     try:
         writer = None
         for batch in iter_decode(chunks, **common):
+            if path is not None:
+                batch = add_deviation(batch, path)
             if writer is None:
                 writer = MeasurementWriter(out, batch.columns, fmt)
             writer.write(batch)
+            if tlm is not None:
+                tlm.send(batch)
+            if da is not None:
+                da.send(batch)
             state["frames"] = batch.stats["frames"]
             stats = batch.stats
         out.flush()
@@ -84,6 +92,15 @@ def cmd_decode(args: argparse.Namespace) -> int:
     finally:
         if out is not sys.stdout:
             out.close()
+        for sink in (tlm, da):
+            if sink is not None:
+                sink.close()
+    for name, sink in (("tlm-out", tlm), ("da-out", da)):
+        if sink is not None and not args.quiet:
+            enc = sink.encoder
+            sat = {k: v for k, v in enc.saturation.items() if v}
+            print(f"radar-io decode: {name}: {enc.frames if name == 'tlm-out' else enc.samples} "
+                  f"records, saturated {sat or 'none'}", file=sys.stderr)
     for problem in report.problems:
         print(f"radar-io decode: warning: {args.input}: {problem}", file=sys.stderr)
     progress.close(", ".join(f"{k} {v}" for k, v in stats.items()))
@@ -98,6 +115,21 @@ def cmd_decode(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ConfigError(f"cannot write {args.stats}: {exc.strerror}") from None
     return 0
+
+
+def _guidance_outputs(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    """The reference path and the TLM1 / D/A file sinks asked for on the command line."""
+    path = tlm = da = None
+    if args.path:
+        from .guidance import load_path
+
+        path = load_path(args.path)
+    if args.tlm_out or args.da_out:
+        from .uplink import DASink, TelemetrySink
+
+        tlm = TelemetrySink(args.tlm_out) if args.tlm_out else None
+        da = DASink(args.da_out) if args.da_out else None
+    return path, tlm, da
 
 
 def _progress(progress: Any, done: int, total: int, state: dict[str, Any]) -> None:
@@ -290,6 +322,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("csv", "jsonl"), help="default from OUT's extension, else csv")
     p.add_argument("--stats", metavar="STATS.json", help="write the framer counters here")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--path", metavar="PATH", help="reference path TOML: adds dy_m,dz_m,along_m,leg")
+    p.add_argument("--tlm-out", metavar="FILE", help="one TLM1 uplink frame per valid sample "
+                   "(needs --path and --site for the default channels)")
+    p.add_argument("--da-out", metavar="FILE", help="the 8 D/A recorder words per sample "
+                   "(big-endian u16; needs --path)")
     _add_common(p)
     p.set_defaults(func=cmd_decode)
 

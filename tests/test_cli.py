@@ -196,3 +196,36 @@ def test_simulate_to_a_serial_device_in_real_time():
     b = decode_bytes(data)
     assert len(b) == 400 and b.stats["crc_errors"] == 0
     assert elapsed > 0.9  # paced, not dumped
+
+
+def test_decode_with_path_tlm_and_da_outputs(sim_recording, tmp_path):
+    """--path adds the deviation columns; --tlm-out / --da-out write what the aircraft and the
+    recorders decode back to the same numbers (struct + binascii here, not the project's decoder)."""
+    import binascii
+    import struct
+
+    out, tlm, da = tmp_path / "t.csv", tmp_path / "up.tlm", tmp_path / "da.bin"
+    r = run_cli("decode", str(sim_recording), "-o", str(out), "--tlm-out", str(tlm), "--da-out",
+                str(da), "--site", str(ROOT / "firmware_specs" / "sites" / "demo.toml"),
+                "--path", str(ROOT / "firmware_specs" / "paths" / "demo_approach_runway.toml"))
+    assert r.returncode == 0, r.stderr
+    assert "tlm-out:" in r.stderr.decode() and "saturated" in r.stderr.decode()
+    rows = list(csv.DictReader(io.StringIO(out.read_text())))
+    assert list(rows[0])[-4:] == ["dy_m", "dz_m", "along_m", "leg"]
+    valid = [row for row in rows if row["rx_good"] == "1" and row["go"] == "1"]
+    data = tlm.read_bytes()
+    assert len(data) == 26 * len(valid)
+    for k in range(0, len(valid), 997):
+        fr = data[26 * k:26 * (k + 1)]
+        sync, seq, *ch = struct.unpack(">HH10h", fr[:24])
+        assert sync == 0x1ACF and binascii.crc_hqx(fr[:24], 0xFFFF) == struct.unpack(">H", fr[24:])[0]
+        dz = float(valid[k]["dz_m"])
+        want = max(-32767, min(32767, round(dz / 150.0 * 32767)))
+        assert ch[1] == want  # channel 2: DZ, ±150 m
+    words = struct.unpack(f">{len(rows) * 8}H", da.read_bytes())
+    assert len(words) == 8 * len(rows)
+    for k in range(0, len(rows), 1013):
+        w = words[8 * k:8 * k + 8]
+        assert [(x >> 12) & 7 for x in w] == list(range(8))  # channel numbers 0..7
+        pen_up = rows[k]["rx_good"] == "0" or rows[k]["go"] == "0"
+        assert all(bool(x & 0x8000) == pen_up for x in w)
