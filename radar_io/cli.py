@@ -141,7 +141,7 @@ def _progress(progress: Any, done: int, total: int, state: dict[str, Any]) -> No
 def cmd_simulate(args: argparse.Namespace) -> int:
     from .recording import RecordingWriter
     from .simulator import FlightScript, RadarSimulator, SimConfig
-    from .sources import open_port
+    from .sources import is_serial_target, open_port
 
     script = FlightScript(**{k: getattr(args, k) for k in FlightScript.__dataclass_fields__
                              if getattr(args, k) is not None})
@@ -154,7 +154,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             raise ConfigError(f"--{name.replace('_', '-')} must be positive")
     sim = RadarSimulator(script, cfg, _load_common(args)["spec"])
     target = args.output
-    is_port = "://" in target or _is_tty(target.split("?", 1)[0])
+    is_port = is_serial_target(target)
     realtime = args.realtime if args.realtime is not None else is_port
     write: Any
     if target == "-":
@@ -195,18 +195,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         print(f"\rsimulate: {sim.state.frame_index} frames in {time.monotonic() - t0:.1f} s"
               f" to {target}; corruption {sim.state.counts}", file=sys.stderr)
     return 0
-
-
-def _is_tty(path: str) -> bool:
-    """True for a terminal device (a serial port, a pty), False for files, /dev/null, pipes."""
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
-    except OSError:
-        return False
-    try:
-        return os.isatty(fd)
-    finally:
-        os.close(fd)
 
 
 # ---------------------------------------------------------------- monitor
@@ -279,7 +267,8 @@ def cmd_serve(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, {
         "source": args.source, "host": args.host, "port": args.port, "site": args.site,
         "calibration": args.calibration, "data_dir": args.data_dir,
-        "auto_record": args.auto_record, "token_file": args.token_file})
+        "auto_record": args.auto_record, "token_file": args.token_file, "path": args.path,
+        "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can})
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     app = create_app(cfg)
     svc = app.state.service
@@ -381,6 +370,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="record per GO period (default), only on request, or always")
     p.add_argument("--token-file", help="file holding the control token "
                    "(or set RADAR_IO_TOKEN; no token = control disabled)")
+    p.add_argument("--path", help="reference path TOML: deviation needles, DY/DZ in messages")
+    p.add_argument("--tlm-out", help="TLM1 uplink: udp://host:port, a serial URL/device or a file")
+    p.add_argument("--da-out", help="D/A recorder words: a serial URL/device or a file")
+    p.add_argument("--can", metavar="INTERFACE:CHANNEL",
+                   help="aircraft air data over CAN, e.g. socketcan:can0 or virtual:air")
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("bench", help="throughput benchmarks",

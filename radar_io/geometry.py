@@ -107,6 +107,16 @@ def runway_xyh(sr_m: ArrayLike, el_deg: ArrayLike, az_deg: ArrayLike, site: Site
             sr_m * np.sin(el) + site.radar_hr_m)
 
 
+def runway_to_radar(xr_m: ArrayLike, yr_m: ArrayLike, hr_m: ArrayLike, site: Site
+                    ) -> tuple[Any, Any, Any]:
+    """Radar rectangular X, Y, H of runway-frame points: the inverse of :func:`runway_xyh`."""
+    p = np.deg2rad(site.runway_heading_deg)
+    a = np.asarray(xr_m) - site.radar_xr_m
+    b = np.asarray(yr_m) - site.radar_yr_m
+    return a * np.cos(p) - b * np.sin(p), a * np.sin(p) + b * np.cos(p), \
+        np.asarray(hr_m) - site.radar_hr_m
+
+
 def geodetic(sr_m: ArrayLike, el_deg: ArrayLike, az_deg: ArrayLike, site: Site
              ) -> tuple[Any, Any, Any]:
     """WGS-84 latitude (deg), longitude (deg), ellipsoidal height (m) of a radar measurement.

@@ -12,6 +12,7 @@ caller reopens it with back-off.
 
 from __future__ import annotations
 
+import os
 import time
 import urllib.parse
 from dataclasses import fields
@@ -97,6 +98,21 @@ class SimSource:
 #: query parameters that set up the port (the rest stay with pyserial's URL handler)
 _PORT_KEYS = {"baudrate": int, "bytesize": int, "stopbits": float, "parity": str,
               "rtscts": bool, "xonxoff": bool, "dsrdtr": bool}
+
+
+def is_serial_target(target: str) -> bool:
+    """True for a pyserial URL or a terminal device (serial port, pty), with or without a
+    ``?baudrate=…`` query; False for files, ``/dev/null``, pipes."""
+    if "://" in target:
+        return True
+    try:
+        fd = os.open(target.split("?", 1)[0], os.O_RDONLY | os.O_NOCTTY | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        return os.isatty(fd)
+    finally:
+        os.close(fd)
 
 
 def open_port(url: str, timeout_s: float = 0.05) -> Any:

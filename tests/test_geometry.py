@@ -51,6 +51,16 @@ def test_runway_frame_is_a_rotation_by_the_runway_heading_plus_offset():
     assert xr1 == pytest.approx(1000.0 + SITE.radar_xr_m) and yr1 == pytest.approx(SITE.radar_yr_m)
 
 
+def test_runway_to_radar_inverts_the_runway_frame():
+    from radar_io.geometry import runway_to_radar
+
+    x, y, h = runway_to_radar(*runway_xyh(SR, EL, AZ, SITE), SITE)
+    x0, y0, h0 = radar_xyh(SR, EL, AZ)
+    np.testing.assert_allclose(x, x0, atol=1e-7)
+    np.testing.assert_allclose(y, y0, atol=1e-7)
+    np.testing.assert_allclose(h, h0, atol=1e-9)
+
+
 def test_geodetic_matches_an_independent_pyproj_ecef_chain():
     lat, lon, hae = geodetic(SR, EL, AZ, SITE)
     to_ecef = Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)

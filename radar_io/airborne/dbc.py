@@ -78,47 +78,75 @@ class AircraftLog:
     problems: list[str] = field(default_factory=list)
 
 
-def decode_messages(msgs: Iterable[Any], db: Any) -> AircraftLog:
-    """Decode python-can messages (log order) into an :class:`AircraftLog`."""
-    ids = {db.get_message_by_name(n).frame_id: n for n in REQUIRED}
-    events: list[tuple[int, float]] = []
-    rows: list[dict[str, float]] = []
-    latest: dict[int, dict[str, float]] = {}     # SampleCount → its most recent row
-    messages = unknown = bad = 0
-    for m in msgs:
+class AirDataDecoder:
+    """Decodes python-can messages one at a time (live use; :func:`decode_messages` for logs).
+
+    :meth:`feed` returns ``("event", (count, time_s))`` for a shutter event,
+    ``("sample_start", row)`` for the first message of an 8 Hz sample (its time),
+    ``("sample", row)`` for each further part, or None. ``row`` is that sample's
+    dict of :data:`SAMPLE_COLUMNS`, filled in place as its parts arrive.
+    """
+
+    def __init__(self, db: Any) -> None:
+        self.db = db
+        self.ids = {db.get_message_by_name(n).frame_id: n for n in REQUIRED}
+        self.latest: dict[int, dict[str, float]] = {}   # SampleCount → its most recent row
+        self.messages = self.unknown = self.undecodable = 0
+
+    def feed(self, m: Any) -> tuple[str, Any] | None:
         if m.is_error_frame or m.is_remote_frame:
-            continue
-        messages += 1
-        name = None if m.is_extended_id else ids.get(m.arbitration_id)
+            return None
+        self.messages += 1
+        name = None if m.is_extended_id else self.ids.get(m.arbitration_id)
         if name is None:
-            unknown += 1
-            continue
+            self.unknown += 1
+            return None
         try:
-            sig = db.decode_message(m.arbitration_id, bytes(m.data), decode_choices=False)
+            sig = self.db.decode_message(m.arbitration_id, bytes(m.data), decode_choices=False)
         except Exception:  # noqa: BLE001 - a malformed payload is counted, never fatal
-            bad += 1
-            continue
+            self.undecodable += 1
+            return None
         if name == "SHUTTER_EVENT":
-            events.append((int(sig["ShutterCount"]), float(sig["ShutterTime"])))
-            continue
+            return "event", (int(sig["ShutterCount"]), float(sig["ShutterTime"]))
         count = int(sig["SampleCount"])
+        kind = "sample"
         if name == "AIR_DATA_TIME":
             row = {"sample_count": float(count)}
-            rows.append(row)
-            latest[count] = row
+            self.latest[count] = row
+            if len(self.latest) > 64:  # keep the recent samples only
+                del self.latest[next(iter(self.latest))]
+            kind = "sample_start"
         else:
-            row = latest.get(count)
+            row = self.latest.get(count)
             if row is None:      # its AIR_DATA_TIME was lost: the sample has no time
-                bad += 1
-                continue
+                self.undecodable += 1
+                return None
         for s, col in SAMPLE_COLUMNS.items():
             if s in sig:
                 row[col] = float(sig[s])
+        return kind, row
+
+
+def decode_messages(msgs: Iterable[Any], db: Any) -> AircraftLog:
+    """Decode python-can messages (log order) into an :class:`AircraftLog`."""
+    dec = AirDataDecoder(db)
+    events: list[tuple[int, float]] = []
+    rows: list[dict[str, float]] = []
+    for m in msgs:
+        got = dec.feed(m)
+        if got is None:
+            continue
+        kind, value = got
+        if kind == "event":
+            events.append(value)
+        elif kind == "sample_start":
+            rows.append(value)
     samples = {c: np.array([r.get(c, np.nan) for r in rows], dtype=np.float64)
                for c in ("sample_count", *SAMPLE_COLUMNS.values())}
     ev = np.array(events, dtype=np.float64).reshape(-1, 2)
     return AircraftLog(event_count=ev[:, 0].astype(np.int64), event_time_s=ev[:, 1],
-                       samples=samples, messages=messages, unknown=unknown, undecodable=bad)
+                       samples=samples, messages=dec.messages, unknown=dec.unknown,
+                       undecodable=dec.undecodable)
 
 
 def read_can_log(path: str | os.PathLike[str], db: Any = None) -> AircraftLog:

@@ -92,7 +92,60 @@ class Service:
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplayController | None = None
+        self._setup_outputs(cfg)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
+
+    def _setup_outputs(self, cfg: ServiceConfig) -> None:
+        """Reference path, TLM1 / D/A sinks and CAN air data, as configured."""
+        from ..guidance import load_path
+        from .outputs import AirDataReader, DeviationProcessor, SinkWorker
+
+        self.path = load_path(cfg.path) if cfg.path else None
+        if self.path is not None:
+            if self.path.frame == "runway" and self.site is None:
+                raise ConfigError("a runway-frame reference path needs a site (--site)")
+            self.acq.processors.append(DeviationProcessor(self.path))
+        self.sinks: dict[str, SinkWorker] = {}
+        if cfg.tlm_out or cfg.da_out:
+            from ..uplink import DASink, TelemetryEncoder, TelemetrySink
+
+            if cfg.tlm_out:
+                enc = TelemetryEncoder(cycle_s=cfg.tlm_cycle_s or None)
+                self.sinks["tlm"] = SinkWorker("tlm", TelemetrySink(cfg.tlm_out, enc))
+            if cfg.da_out:
+                self.sinks["da"] = SinkWorker("da", DASink(cfg.da_out))
+            for w in self.sinks.values():
+                self.acq.processors.append(w.submit)
+        self.air: AirDataReader | None = None
+        if cfg.can:
+            interface, channel = cfg.can.split(":", 1)
+            self.air = AirDataReader(interface, channel, self.latest_radar, cfg.can_bitrate)
+
+    def latest_radar(self) -> dict[str, Any] | None:
+        items = self.history.latest(1)
+        return items[0][1] if items else None
+
+    def close(self) -> None:
+        for w in self.sinks.values():
+            w.close()
+        if self.air is not None:
+            self.air.close()
+
+    def path_polyline(self, step_m: float = 50.0) -> dict[str, Any] | None:
+        """The reference path sampled every ``step_m`` in the radar frame (for drawing)."""
+        import numpy as np
+
+        if self.path is None:
+            return None
+        from ..geometry import runway_to_radar
+
+        s = np.append(np.arange(0.0, self.path.length_m, step_m), self.path.length_m)
+        x, y, h = self.path.position(s)
+        if self.path.frame == "runway":
+            x, y, h = runway_to_radar(x, y, h, self.site)
+        return {"frame": self.path.frame, "length_m": float(self.path.length_m),
+                "x_m": np.round(x, 2).tolist(), "y_m": np.round(y, 2).tolist(),
+                "h_m": np.round(h, 2).tolist()}
 
     def recording_path(self, rec_id: str) -> Path:
         if not _ID.match(rec_id) or ".." in rec_id:
@@ -117,6 +170,9 @@ class Service:
         st["site"] = self.site.name if self.site else None
         st["version"] = __version__
         st["instance"] = self.instance
+        st["path"] = self.cfg.path
+        st["uplink"] = {k: w.stats() for k, w in self.sinks.items()}
+        st["airdata"] = self.air.stats() if self.air is not None else None
         return st
 
 
@@ -132,6 +188,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         finally:
             svc.acq.stop()
             svc.recorder.close()
+            svc.close()
 
     app = FastAPI(title="radar_io", version=__version__, lifespan=lifespan,
                   description="Live tracking-radar data, recordings, replay and calibration. "
@@ -163,6 +220,20 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
     def site() -> dict[str, Any] | None:
         """The radar site (WGS-84 position, runway frame), or null when none is configured."""
         return svc.site.to_dict() if svc.site else None
+
+    @app.get("/api/path", tags=["live"])
+    def path() -> dict[str, Any] | None:
+        """The reference path in the radar frame, sampled every 50 m (null when none)."""
+        return svc.path_polyline()
+
+    @app.get("/api/airdata", tags=["live"])
+    def airdata(since: int = Query(0, ge=0), limit: int = Query(2000, ge=1, le=10000)
+                ) -> dict[str, Any]:
+        """The aircraft's 8 Hz air data from CAN (SI units), with the radar ground range and
+        height at arrival; ``samples`` after ``air_seq`` = since."""
+        if svc.air is None:
+            raise HTTPException(404, "no CAN air-data source configured (--can interface:channel)")
+        return {"samples": svc.air.since(since, limit), **svc.air.stats()}
 
     @app.get("/api/track", tags=["live"])
     def track(since: int | None = Query(None, ge=0, description="return messages after this msg_seq"),

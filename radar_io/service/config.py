@@ -33,6 +33,12 @@ class ServiceConfig:
     history_size: int = 120_000      #: messages kept for /api/track and ws resume (2 min at 1 kHz)
     ws_queue_size: int = 5000        #: per websocket client, oldest dropped beyond
     spec: str | None = None
+    path: str | None = None          #: reference path TOML: adds dy_m, dz_m, along_m, leg
+    tlm_out: str | None = None       #: TLM1 uplink: udp://host:port, a serial URL/device or a file
+    tlm_cycle_s: float = 0.02        #: one uplink frame per cycle (the source's 20 ms)
+    da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
+    can: str | None = None           #: aircraft air data: python-can "interface:channel"
+    can_bitrate: int | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
     def resolved_site(self) -> str | None:
@@ -78,6 +84,8 @@ def load_config(path: str | None, overrides: dict[str, Any]) -> ServiceConfig:
             setattr(cfg, k, v)
     if cfg.auto_record not in ("go", "manual", "always"):
         raise ConfigError("auto_record must be go, manual or always")
+    if cfg.can is not None and ":" not in cfg.can:
+        raise ConfigError(f"can = {cfg.can!r}: expected 'interface:channel', e.g. socketcan:can0")
     if not 0 < int(cfg.port) < 65536:
         raise ConfigError(f"port {cfg.port} is out of range")
     return cfg

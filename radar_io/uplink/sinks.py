@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SourceError
+from ..sources import is_serial_target, open_port
 from .da import DAEncoder
 from .errors import UplinkError
 from .tlm import TelemetryEncoder
@@ -48,8 +49,7 @@ class ByteSink:
             except OSError as exc:
                 raise UplinkError(f"cannot open {target}: {exc}") from None
             self.kind = "udp"
-        elif "://" in target or target.startswith("/dev/"):
-            from ..sources import open_port
+        elif is_serial_target(target):
 
             try:
                 self.handle = open_port(target)
@@ -57,8 +57,8 @@ class ByteSink:
                 raise UplinkError(str(exc)) from None
             self.kind = "serial"
         else:
-            try:
-                self.handle = open(target, "wb")
+            try:  # unbuffered: every write (whole records) reaches the file at once
+                self.handle = open(target, "wb", buffering=0)
             except OSError as exc:
                 raise UplinkError(f"cannot write {target}: {exc.strerror}") from None
             self.kind = "file"
@@ -70,6 +70,10 @@ class ByteSink:
                 n = self.record_bytes
                 for k in range(0, len(data), n):
                     self.handle.sendto(data[k:k + n], self._udp)
+            elif self.kind == "file":
+                view = memoryview(data)
+                while view:  # a raw file may take fewer bytes than offered
+                    view = view[self.handle.write(view):]
             elif data:
                 self.handle.write(data)
         except Exception as exc:  # noqa: BLE001 - serial, socket and file errors alike

@@ -12,6 +12,9 @@ const S = (window.radarState = {
   last: null,            // last message
   status: null,
   site: null,
+  path: null,            // reference path polyline in the radar frame {x_m, y_m, h_m}
+  air: [],               // air data samples (SI) with the radar ground range at arrival
+  airSeq: 0,
   ws: null,
   connected: false,
   reconnects: 0,
@@ -69,6 +72,12 @@ async function poll() {
     S.status = st;
     if (S.instance !== null && st.instance !== S.instance && S.ws) S.ws.close(); // restarted
     if (!S.site && st.site) S.site = await (await fetch("/api/site")).json();
+    if (!S.path && st.path) S.path = await (await fetch("/api/path")).json();
+    if (st.airdata) {
+      const doc = await (await fetch(`/api/airdata?since=${S.airSeq}`)).json();
+      for (const a of doc.samples) { S.air.push(a); S.airSeq = a.air_seq; }
+      if (S.air.length > 8 * 600) S.air.splice(0, S.air.length - 8 * 600);
+    }
   } catch (e) {
     S.status = null;
   }
@@ -101,6 +110,8 @@ function drawPlan() {
   let r = 5000;
   for (let i = Math.max(0, pts.length - 5000); i < pts.length; i++) r = Math.max(r, Math.abs(pts[i].x), Math.abs(pts[i].y));
   if (ref) r = Math.max(r, Math.abs(ref.td.x), Math.abs(ref.td.y));
+  const path = S.path;
+  if (path) for (let i = 0; i < path.x_m.length; i += 10) r = Math.max(r, Math.abs(path.x_m[i]), Math.abs(path.y_m[i]));
   r *= 1.1;
   const k = (Math.min(W, H) / 2) / r, cx = W / 2, cy = H / 2;
   const P = (x, y) => [cx + y * k, cy - x * k]; // north up, east right
@@ -116,6 +127,11 @@ function drawPlan() {
     g.strokeStyle = "#d29922"; g.setLineDash([8, 6]); g.beginPath();
     g.moveTo(...P(ref.from.x, ref.from.y)); g.lineTo(...P(ref.to.x, ref.to.y)); g.stroke();
     g.setLineDash([]); g.fillStyle = "#d29922"; const t = P(ref.td.x, ref.td.y); g.fillRect(t[0] - 3, t[1] - 3, 6, 6);
+  }
+  if (path) {
+    g.strokeStyle = "#a371f7"; g.lineWidth = 2; g.beginPath();
+    path.x_m.forEach((x, i) => { const p = P(x, path.y_m[i]); if (i === 0) g.moveTo(p[0], p[1]); else g.lineTo(p[0], p[1]); });
+    g.stroke(); g.lineWidth = 1;
   }
   g.fillStyle = "#fff"; g.beginPath(); g.arc(cx, cy, 4, 0, 2 * Math.PI); g.fill();
   g.strokeStyle = "#3b82f6"; g.lineWidth = 2; g.beginPath();
@@ -135,15 +151,55 @@ function drawProfile() {
   const pts = S.points;
   let gmax = 5000, hmax = 500;
   for (const p of pts) { gmax = Math.max(gmax, p.g); hmax = Math.max(hmax, p.h); }
+  const path = S.path, pg = path ? path.x_m.map((x, i) => Math.hypot(x, path.y_m[i])) : [];
+  if (path) path.h_m.forEach((h, i) => { gmax = Math.max(gmax, pg[i]); hmax = Math.max(hmax, h); });
+  for (const a of S.air) if (a.pressure_altitude_m !== null) hmax = Math.max(hmax, a.pressure_altitude_m);
   gmax *= 1.05; hmax *= 1.2;
   const L = 40, B = 20, kx = (W - L - 8) / gmax, ky = (H - B - 8) / hmax;
   const P = (gr, h) => [L + gr * kx, H - B - h * ky];
   g.strokeStyle = "#30363d"; g.fillStyle = "#7a8494"; g.font = "11px sans-serif";
   for (let v = 0; v <= gmax; v += niceStep(gmax)) { const p = P(v, 0); g.beginPath(); g.moveTo(p[0], 8); g.lineTo(p[0], H - B); g.stroke(); g.fillText(`${(v / 1000).toFixed(0)} km`, p[0] + 2, H - 6); }
   for (let v = 0; v <= hmax; v += niceStep(hmax)) { const p = P(0, v); g.beginPath(); g.moveTo(L, p[1]); g.lineTo(W, p[1]); g.stroke(); g.fillText(`${v.toFixed(0)}`, 2, p[1] + 4); }
+  if (path) {
+    g.strokeStyle = "#a371f7"; g.lineWidth = 2; g.beginPath();
+    path.h_m.forEach((h, i) => { const q = P(pg[i], h); if (i === 0) g.moveTo(q[0], q[1]); else g.lineTo(q[0], q[1]); });
+    g.stroke();
+  }
   g.strokeStyle = "#3b82f6"; g.lineWidth = 2; g.beginPath();
   pts.forEach((p, i) => { const q = P(p.g, p.h); if (i === 0) g.moveTo(q[0], q[1]); else g.lineTo(q[0], q[1]); });
   g.stroke();
+  g.fillStyle = "#f778ba";  // aircraft pressure altitude at the radar ground range of its arrival
+  for (const a of S.air) if (a.radar_ground_range_m !== null && a.pressure_altitude_m !== null) {
+    const q = P(a.radar_ground_range_m, a.pressure_altitude_m); g.fillRect(q[0] - 1.5, q[1] - 1.5, 3, 3);
+  }
+  g.font = "11px sans-serif";
+  g.fillStyle = "#3b82f6"; g.fillText("radar H", W - 170, 14);
+  if (path) { g.fillStyle = "#a371f7"; g.fillText("path", W - 120, 14); }
+  if (S.air.length) { g.fillStyle = "#f778ba"; g.fillText("press. alt", W - 85, 14); }
+}
+
+function drawNeedles(m) {
+  // fly-to convention, like ILS: aircraft right of the path (DY > 0) → needle left of centre;
+  // above the path (DZ > 0) → needle below centre. Full scale: DY ±500 m, DZ ±150 m (TLM1 scales).
+  const cv = $("ils"), g = cv.getContext("2d"), W = cv.width, H = cv.height, c = W / 2;
+  g.clearRect(0, 0, W, H);
+  g.strokeStyle = "#30363d"; g.lineWidth = 1; g.strokeRect(0.5, 0.5, W - 1, H - 1);
+  g.fillStyle = "#7a8494";
+  for (let k = -2; k <= 2; k++) {
+    if (!k) continue;
+    g.beginPath(); g.arc(c + (k * (W - 30)) / 4, c, 3, 0, 2 * Math.PI); g.fill();
+    g.beginPath(); g.arc(c, c + (k * (H - 30)) / 4, 3, 0, 2 * Math.PI); g.fill();
+  }
+  g.strokeStyle = "#fff"; g.strokeRect(c - 6, c - 6, 12, 12);
+  const ok = m && m.dy_m !== null && m.dy_m !== undefined;
+  const clamp = (v) => Math.max(-1, Math.min(1, v));
+  g.lineWidth = 4;
+  g.strokeStyle = ok ? "#d29922" : "#da3633";
+  const dx = ok ? -clamp(m.dy_m / 500) : 0, dz = ok ? clamp(m.dz_m / 150) : 0;
+  g.beginPath(); g.moveTo(c + (dx * (W - 30)) / 2, 8); g.lineTo(c + (dx * (W - 30)) / 2, H - 8); g.stroke();
+  g.beginPath(); g.moveTo(8, c + (dz * (H - 30)) / 2); g.lineTo(W - 8, c + (dz * (H - 30)) / 2); g.stroke();
+  if (!ok) { g.fillStyle = "#da3633"; g.font = "bold 13px sans-serif"; g.fillText("NO DEV", 8, 18); }
+  S.needles = { dx, dz, ok };
 }
 
 function setBar(id, v, fullScale) {
@@ -178,6 +234,19 @@ function render() {
     $("r-x").textContent = fmt(m.x_m, 1); $("r-y").textContent = fmt(m.y_m, 1); $("r-h").textContent = fmt(m.h_m, 1);
     $("r-tod").textContent = fmt(m.tod_s, 3); $("r-seq").textContent = m.seq;
     setBar("dsr", m.dsr_m, 50); setBar("del", m.del_deg, 1); setBar("daz", m.daz_deg, 1);
+    $("r-dy").textContent = fmt(m.dy_m, 1); $("r-dz").textContent = fmt(m.dz_m, 1);
+    $("r-along").textContent = fmt(m.along_m, 0); $("r-leg").textContent = m.leg === undefined ? "—" : m.leg;
+  }
+  $("needles").hidden = !(st && st.path);
+  if (st && st.path) drawNeedles(stale ? null : m);
+  $("air").hidden = !(st && st.airdata);
+  const a = S.air.length ? S.air[S.air.length - 1] : null;
+  if (a) {
+    $("a-ias").textContent = fmt(a.ias_mps, 1) + " m/s"; $("a-alt").textContent = fmt(a.pressure_altitude_m, 1) + " m";
+    $("a-pitch").textContent = fmt(a.pitch_deg, 2) + "°"; $("a-roll").textContent = fmt(a.roll_deg, 2) + "°";
+    $("a-hdg").textContent = fmt(a.heading_deg, 1) + "°"; $("a-shut").textContent = a.shutter_count ?? "—";
+    $("a-dme1").textContent = fmt(a.dme1_m, 0) + " m"; $("a-dme2").textContent = fmt(a.dme2_m, 0) + " m";
+    $("air-age").textContent = st && st.airdata && st.airdata.last_sample_age_s !== null ? `${st.airdata.last_sample_age_s.toFixed(1)} s ago` : "";
   }
   $("link").textContent = S.connected ? "ONLINE" : "OFFLINE";
   $("link").className = "tag " + (S.connected ? "ok" : "bad");
