@@ -439,6 +439,9 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
             "recordings": sorted(events), "pairs": len(pairs)})
         return {"pairs": pairs, "statistics": stats, "calibration": cal.to_dict()}
 
+    from .runway_routes import router as runway_router
+
+    app.include_router(runway_router)
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
 
     @app.get("/", include_in_schema=False)

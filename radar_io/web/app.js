@@ -335,6 +335,69 @@ $("apply").onclick = async () => {
   $("apply").disabled = true;
 };
 
+// ---------------------------------------------------------------- runway vision
+const RW = (window.runwayState = { img: null, width: 0, height: 0, points: { horizon: [], left_edge: [], right_edge: [] }, lines: null, result: null });
+const RW_COLORS = { horizon: "#50dc50", left_edge: "#e63c3c", right_edge: "#2878e6" };
+function rwDraw() {
+  const cv = $("rw-canvas"), g = cv.getContext("2d");
+  if (!RW.img) return;
+  cv.width = RW.width; cv.height = RW.height;
+  g.drawImage(RW.img, 0, 0);
+  for (const [k, pts] of Object.entries(RW.points)) {
+    g.fillStyle = RW_COLORS[k];
+    for (const [x, y] of pts) { g.beginPath(); g.arc(x, y, 4, 0, 2 * Math.PI); g.fill(); }
+  }
+}
+function rwShow(doc) {
+  RW.result = doc;
+  const f = (v, d, u) => (v === null || v === undefined ? "—" : `${Number(v).toFixed(d)}${u}`);
+  $("rw-result").textContent = doc.found
+    ? `bank ${f(doc.bank_deg, 2, "°")}  pitch ${f(doc.pitch_deg, 2, "°")}  yaw ${f(doc.yaw_deg, 2, "°")}  height ${f(doc.height_m, 1, " m")}  lateral ${f(doc.lateral_m, 1, " m")}  quality ${f(doc.quality, 2, "")}`
+    : `no runway found: ${doc.reason || doc.detail || "?"}`;
+}
+function rwLoadImage(src, w, h) {
+  return new Promise((resolve) => {
+    const im = new Image();
+    im.onload = () => { RW.img = im; RW.width = w || im.naturalWidth; RW.height = h || im.naturalHeight; rwDraw(); resolve(); };
+    im.src = src;
+  });
+}
+$("rw-file").onchange = async () => {
+  const file = $("rw-file").files[0];
+  if (file && file.type.startsWith("image/")) {
+    RW.points = { horizon: [], left_edge: [], right_edge: [] };
+    await rwLoadImage(URL.createObjectURL(file));
+  }
+};
+$("rw-go").onclick = async () => {
+  const file = $("rw-file").files[0];
+  if (!file) { $("rw-result").textContent = "choose an image or a video first"; return; }
+  $("rw-result").textContent = "…";
+  const q = `focal_px=${$("rw-f").value}&half_width_m=${$("rw-d").value}`;
+  const res = await fetch(`/api/runway?${q}`, { method: "POST", body: file, headers: { "Content-Type": file.type || "application/octet-stream" } });
+  const doc = await res.json();
+  if (!res.ok) { $("rw-result").textContent = `${res.status}: ${typeof doc.detail === "string" ? doc.detail : JSON.stringify(doc.detail)}`; return; }
+  if (doc.frames) { RW.result = doc; $("rw-result").textContent = doc.frames.map((r) => `#${r.frame} ` + (r.found ? `bank ${r.bank_deg} pitch ${r.pitch_deg} yaw ${r.yaw_deg} h ${r.height_m} lat ${r.lateral_m} q ${r.quality}` : `not found: ${r.reason}`)).join("\n"); return; }
+  if (doc.overlay_png_base64) await rwLoadImage("data:image/png;base64," + doc.overlay_png_base64, doc.image.width, doc.image.height);
+  rwShow(doc);
+};
+$("rw-canvas").onclick = (ev) => {
+  if (!RW.img) return;
+  const cv = $("rw-canvas"), r = cv.getBoundingClientRect();
+  const x = ((ev.clientX - r.left) * cv.width) / r.width, y = ((ev.clientY - r.top) * cv.height) / r.height;
+  RW.points[$("rw-line").value].push([x, y]);
+  rwDraw();
+};
+$("rw-clear").onclick = () => { RW.points = { horizon: [], left_edge: [], right_edge: [] }; rwDraw(); };
+$("rw-manual").onclick = async () => {
+  if (!RW.img) { $("rw-result").textContent = "load an image first"; return; }
+  const body = { points: RW.points, focal_px: Number($("rw-f").value), half_width_m: Number($("rw-d").value), principal_point: [RW.width / 2, RW.height / 2] };
+  const res = await fetch("/api/runway/manual", { method: "POST", headers: { "Content-Type": "application/json" }, body: JSON.stringify(body) });
+  const doc = await res.json();
+  if (!res.ok) { $("rw-result").textContent = `${res.status}: ${typeof doc.detail === "string" ? doc.detail : JSON.stringify(doc.detail)}`; return; }
+  rwShow(doc);
+};
+
 connect();
 poll();
 listRecordings();
