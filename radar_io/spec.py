@@ -14,6 +14,7 @@ import hashlib
 import math
 import operator
 import os
+import sys
 import tomllib
 from dataclasses import dataclass
 from functools import lru_cache
@@ -31,11 +32,16 @@ REQUIRED_FLAGS = ("sync", "rx_good", "go")
 
 
 def spec_dir() -> Path:
-    """The ``firmware_specs`` directory: ``$RADAR_IO_SPEC_DIR`` or the one beside the package."""
+    """The ``firmware_specs`` directory: ``$RADAR_IO_SPEC_DIR``, else the one beside the
+    package (a source checkout or editable install), else the installed copy under
+    ``<prefix>/share/radar-io/``."""
     env = os.environ.get("RADAR_IO_SPEC_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parent.parent / "firmware_specs"
+    beside = Path(__file__).resolve().parent.parent / "firmware_specs"
+    if beside.is_dir():
+        return beside
+    return Path(sys.prefix) / "share" / "radar-io" / "firmware_specs"
 
 
 _BINOPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
