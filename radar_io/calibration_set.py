@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import ConfigError
+from .textfiles import read_json
 
 FORMAT = "radar_io-calibration/1"
 
@@ -89,16 +90,8 @@ class Calibration:
 
 def load_calibration(path: str | os.PathLike[str]) -> Calibration:
     """Read a calibration set JSON file."""
-    p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"calibration file not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"cannot read calibration file {p}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise ConfigError(f"calibration file {p} is not valid JSON: {exc}") from None
-    return Calibration.from_dict(doc, source=str(p))
+    doc = read_json(path, "calibration file")
+    return Calibration.from_dict(doc, source=str(path))
 
 
 def save_calibration(cal: Calibration, path: str | os.PathLike[str]) -> None:

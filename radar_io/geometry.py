@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,7 @@ import numpy as np
 import pymap3d
 
 from .errors import ConfigError
+from .textfiles import read_toml
 
 ArrayLike = Any
 
@@ -65,12 +65,7 @@ class Site:
 def load_site(path: str | os.PathLike[str]) -> Site:
     """Read a site TOML file (see ``firmware_specs/sites/demo.toml``)."""
     p = Path(path)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"site file not found: {p}") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise ConfigError(f"cannot read site file {p}: {exc}") from None
+    doc = read_toml(p, "site file")
 
     def num(section: str, key: str, lo: float, hi: float) -> float:
         tab = doc.get(section)

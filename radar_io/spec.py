@@ -15,7 +15,6 @@ import math
 import operator
 import os
 import sys
-import tomllib
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -24,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .errors import SpecError
+from .textfiles import parse_toml, read_text
 
 ENCODINGS = ("unsigned", "twos_complement", "offset_binary")
 #: words the maths of radar-interface.md §4–§5 refers to by name
@@ -243,11 +243,8 @@ def _mtime(p: Path) -> int:
 
 @lru_cache(maxsize=16)
 def _load_spec_cached(path: str, _mtime_ns: int) -> FrameSpec:
-    raw = Path(path).read_bytes()
-    try:
-        doc = tomllib.loads(raw.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SpecError(f"{path}: not valid TOML: {exc}") from None
+    p, raw = read_text(path, "spec file", SpecError)
+    doc = parse_toml(p, raw, "spec file", SpecError)
     return _build_spec(doc, path, hashlib.sha256(raw).hexdigest())
 
 

@@ -99,7 +99,7 @@ def test_decoder_site_columns_match_the_functions(spec):
 
 
 @pytest.mark.parametrize("text,msg", [("name='x'", "missing"), ("[radar]\nlat_deg=95\n", "outside"),
-                                      ("[radar\n", "cannot read")])
+                                      ("[radar\n", "not valid TOML")])
 def test_bad_site_files(tmp_path, text, msg):
     p = tmp_path / "site.toml"
     p.write_text(text)

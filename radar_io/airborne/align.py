@@ -139,7 +139,6 @@ def fit_clock(radar_edge_s: np.ndarray, event_time_s: np.ndarray, event_count: n
     r = np.asarray(radar_edge_s, dtype=np.float64)
     order = np.argsort(event_count, kind="stable")
     counts = np.asarray(event_count)[order]
-    times = np.asarray(event_time_s, dtype=np.float64)[order]
     need = 3 if drift else 2
     if r.size == 0 or counts.size == 0:
         raise AirborneError(f"no shutter events to match: {r.size} radar SYNC edges, "

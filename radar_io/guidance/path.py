@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -42,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..decoding import MeasurementBatch
+from ..textfiles import read_toml
 from ..errors import ConfigError
 
 #: columns added by :func:`add_deviation`
@@ -225,12 +225,7 @@ class ReferencePath:
 def load_path(path: str | os.PathLike[str]) -> ReferencePath:
     """Read a path TOML file (see ``firmware_specs/paths/``); raises PathError naming the problem."""
     p = Path(path)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise PathError(f"path file not found: {p}") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise PathError(f"cannot read path file {p}: {exc}") from None
+    doc = read_toml(p, "path file", PathError)
     unknown = set(doc) - _TOP_KEYS
     if unknown:
         raise PathError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")

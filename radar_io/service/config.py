@@ -8,13 +8,13 @@ token configured the control endpoints are disabled and say so.
 from __future__ import annotations
 
 import os
-import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
 from ..spec import spec_dir
+from ..textfiles import read_toml
 
 TOKEN_ENV = "RADAR_IO_TOKEN"
 
@@ -68,12 +68,7 @@ def load_config(path: str | None, overrides: dict[str, Any]) -> ServiceConfig:
     """Config from a TOML file (optional) with non-None overrides applied."""
     doc: dict[str, Any] = {}
     if path:
-        try:
-            doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"config file not found: {path}") from None
-        except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ConfigError(f"cannot read config file {path}: {exc}") from None
+        doc = read_toml(path, "config file")
     known = {f.name for f in fields(ServiceConfig)} - {"extra"}
     unknown = set(doc) - known
     if unknown:

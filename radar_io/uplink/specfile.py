@@ -5,28 +5,19 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import tomllib
 from pathlib import Path
 from typing import Any
 
 from ..errors import SpecError
 from ..spec import CrcSpec, eval_number, spec_dir
+from ..textfiles import parse_toml, read_text
 
 
 def read_toml(path: str | os.PathLike[str] | None, default_name: str) -> tuple[dict[str, Any], str, str]:
     """(document, path, sha256) of a spec file; default ``firmware_specs/<default_name>``."""
-    p = Path(path) if path is not None else spec_dir() / default_name
-    try:
-        raw = p.read_bytes()
-    except FileNotFoundError:
-        raise SpecError(f"spec file not found: {p}") from None
-    except OSError as exc:
-        raise SpecError(f"cannot read spec file {p}: {exc.strerror}") from None
-    try:
-        doc = tomllib.loads(raw.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise SpecError(f"{p}: not valid TOML: {exc}") from None
-    return doc, str(p), hashlib.sha256(raw).hexdigest()
+    p, raw = read_text(Path(path) if path is not None else spec_dir() / default_name,
+                       "spec file", SpecError)
+    return parse_toml(p, raw, "spec file", SpecError), str(p), hashlib.sha256(raw).hexdigest()
 
 
 def req(table: dict[str, Any], key: str, typ: type | tuple[type, ...], where: str) -> Any:

@@ -18,7 +18,6 @@ inverse slope in the bank-corrected image), so swapped labels do no harm.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..textfiles import read_json
 from .chain import ChainParams, RunwayResult, pose_from_point_sets
 from .errors import VisionError
 
@@ -55,14 +55,7 @@ def _as_points(name: str, value: Any) -> NDArray[np.float64]:
 def load_points(path: str | Path) -> dict[str, NDArray[np.float64]]:
     """Read and validate a points file; returns ``{key: (n, 2) array}`` for :data:`LINE_KEYS`."""
     p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise VisionError(f"points file not found: {p}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise VisionError(f"cannot read points file {p}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise VisionError(f"points file {p} is not valid JSON: {exc.msg} (line {exc.lineno})") from None
+    data = read_json(p, "points file", VisionError)
     if not isinstance(data, Mapping):
         raise VisionError(f"points file {p} must hold a JSON object with keys {', '.join(LINE_KEYS)}")
     missing = [k for k in LINE_KEYS if k not in data]

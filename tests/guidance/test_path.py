@@ -263,7 +263,7 @@ PTS = "[[points]]\nx_m = 0.0\ny_m = 0.0\nh_m = 100.0\n"
     ('turn_radius_m = 1000.0\n' + PTS + PTS, "frame must be"),
     ('frame = "radar"\n' + PTS + PTS, "missing turn_radius_m"),
     ('frame = "radar"\nturn_radius_m = 1000.0\npoints = 3\n', "expected [[points]]"),
-    ("frame = = 1\n", "cannot read path file"),
+    ("frame = = 1\n", "is not valid TOML"),
 ])
 def test_bad_path_files(tmp_path, text, message):
     f = write(tmp_path, text)

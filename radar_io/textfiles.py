@@ -1,0 +1,52 @@
+"""Reading the project's small text documents (TOML specs, sites, paths, configs; JSON sets)
+with one clear error naming the file and the problem, raised as the caller's error type."""
+
+from __future__ import annotations
+
+import json
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from .errors import ConfigError, RadarIOError
+
+
+def read_text(path: str | os.PathLike[str], what: str,
+              error: type[RadarIOError] = ConfigError) -> tuple[Path, bytes]:
+    """The raw bytes of ``path``; ``what`` names the document in messages (``"site file"``)."""
+    p = Path(path)
+    try:
+        return p, p.read_bytes()
+    except FileNotFoundError:
+        raise error(f"{what} not found: {p}") from None
+    except IsADirectoryError:
+        raise error(f"{what} {p} is a directory") from None
+    except OSError as exc:
+        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from None
+
+
+def read_toml(path: str | os.PathLike[str], what: str,
+              error: type[RadarIOError] = ConfigError) -> dict[str, Any]:
+    """A TOML document as a dict."""
+    return parse_toml(*read_text(path, what, error), what, error)
+
+
+def parse_toml(p: Path, raw: bytes, what: str,
+               error: type[RadarIOError] = ConfigError) -> dict[str, Any]:
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"{what} {p} is not valid TOML: {exc}") from None
+
+
+def read_json(path: str | os.PathLike[str], what: str,
+              error: type[RadarIOError] = ConfigError) -> Any:
+    """A JSON document."""
+    p, raw = read_text(path, what, error)
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise error(f"{what} {p} is not UTF-8 text: {exc}") from None
+    except json.JSONDecodeError as exc:
+        raise error(f"{what} {p} is not valid JSON: {exc.msg} (line {exc.lineno})") from None
