@@ -36,6 +36,7 @@ def radar_sea(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike) -> tuple[Any, Any,
     sr = np.sqrt(np.square(x_m) + np.square(y_m) + np.square(h_m))
     el = np.rad2deg(np.arctan2(h_m, ground))
     az = np.mod(np.rad2deg(np.arctan2(y_m, x_m)), 360.0)
+    az = np.where(az >= 360.0, az - 360.0, az)  # np.mod(-1e-14, 360) rounds to 360.0
     return sr, el, az
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..calibration_set import Calibration
 from ..decoding import FrameDecoder
-from ..errors import RadarIOError, SourceError
+from ..errors import RadarIOError, RecordingError
 from ..framing import Framer
 from ..geometry import Site, geodetic, runway_xyh
 from ..sources import ByteSource, open_source
@@ -39,6 +39,10 @@ def encode_message(m: dict[str, Any]) -> str:
     return json.dumps(m, separators=(",", ":"), allow_nan=False)
 
 
+def _why(exc: Exception) -> str:
+    return str(exc) if isinstance(exc, RadarIOError) else f"{type(exc).__name__}: {exc}"
+
+
 class Acquisition:
     """Reader thread: source → recorder → framer → decoder → coordinates → history → publish."""
 
@@ -53,11 +57,12 @@ class Acquisition:
         self.processors: list[Processor] = []
         self.live_url = source_url
         self._source: ByteSource = open_source(source_url)
-        self._pending_source: ByteSource | None = None
+        self._pending: tuple[ByteSource, str] | None = None  # (source, mode) to switch to
         self.decoder = FrameDecoder(spec, calibration)
         self.framer = Framer(spec)
         self.connected = False
         self.reconnects = 0
+        self.processing_errors = 0
         self.last_error: str | None = None
         self.go = 0
         self.rx_good = 0
@@ -85,8 +90,7 @@ class Acquisition:
 
     def switch_source(self, source: ByteSource, mode: str) -> None:
         """Hand the reader a new source (replay or back to live); done by the reader thread."""
-        self._pending_source = source
-        self._pending_mode = mode
+        self._pending = (source, mode)
 
     @property
     def source(self) -> ByteSource:
@@ -102,51 +106,61 @@ class Acquisition:
             "bytes_discarded": st.bytes_discarded, "seq_gaps": st.seq_gaps,
             "rate_hz": self.rate_hz(now), "go": self.go, "rx_good": self.rx_good,
             "last_frame_age_s": age, "reconnects": self.reconnects, "last_error": self.last_error,
+            "recording_error": self.recorder.last_error, "processing_errors": self.processing_errors,
         }
 
     def rate_hz(self, now: float | None = None) -> float:
+        """Frames per second over the last 2 s (0 when nothing came for 1 s). Any thread."""
         now = time.monotonic() if now is None else now
-        r = self._rate
-        while r and now - r[0][0] > 2.0:
-            r.popleft()
-        if not r or now - r[0][0] <= 0:
+        r = [e for e in list(self._rate) if now - e[0] <= 2.0]  # a snapshot: no shared mutation
+        if len(r) < 2 or now - r[-1][0] >= 1.0:
             return 0.0
-        n = sum(k for _, k in r) - r[0][1]
         span = r[-1][0] - r[0][0]
-        return n / span if span > 0.2 and now - r[-1][0] < 1.0 else 0.0
+        return (sum(k for _, k in r) - r[0][1]) / span if span > 0.2 else 0.0
 
     # -- the reader thread -----------------------------------------------------------------
     def _run(self) -> None:
+        """Open, read, process; any failure of the source is a disconnect with back-off
+        (0.1 s doubling to 5 s, reset only once data flows again). Never exits on error."""
         delay = self.backoff_s[0]
         while not self._stop.is_set():
-            if self._pending_source is not None:
+            if self._pending is not None:
                 self._swap_source()
             if not self.connected:
                 try:
                     self._source.open()
-                except RadarIOError as exc:
-                    self._disconnected(str(exc))
+                except Exception as exc:  # noqa: BLE001 - SourceError, OSError, driver bugs
+                    self._disconnected(_why(exc))
                     self._stop.wait(delay)
                     delay = min(delay * 2, self.backoff_s[1])
                     continue
                 self.connected = True
-                self.last_error = None
-                delay = self.backoff_s[0]
                 log.info("source %s open", self._source.url)
             try:
                 data = self._source.read(self.read_timeout_s)
-            except SourceError as exc:
-                self._source.close()
+            except Exception as exc:  # noqa: BLE001
+                self._close_source()
                 self.reconnects += 1
-                self._disconnected(str(exc))
+                self._disconnected(_why(exc))
+                self._stop.wait(delay)  # a port that opens but cannot be read must not spin
+                delay = min(delay * 2, self.backoff_s[1])
                 continue
             if data:
+                delay = self.backoff_s[0]
+                self.last_error = None
                 try:
                     self._process(data, time.time_ns())
                 except Exception:  # noqa: BLE001 - a bug downstream must not stop acquisition
+                    self.processing_errors += 1
                     log.exception("processing a chunk failed")
-        self._source.close()
+        self._close_source()
         self.connected = False
+
+    def _close_source(self) -> None:
+        try:
+            self._source.close()
+        except Exception:  # noqa: BLE001 - closing a dead source must never stop the reader
+            log.exception("closing %s failed", self._source.url)
 
     def _disconnected(self, why: str) -> None:
         if self.connected or self.last_error != why:
@@ -155,46 +169,65 @@ class Acquisition:
         self.last_error = why
 
     def _swap_source(self) -> None:
-        new, self._pending_source = self._pending_source, None
-        self._source.close()
+        (new, mode), self._pending = self._pending, None  # type: ignore[misc]
+        self._close_source()
         self.connected = False
-        self._source = new  # type: ignore[assignment]
-        self.mode = self._pending_mode
-        self.recorder.enabled = self.mode == "live"
+        self._source = new
+        self.mode = mode
         self.framer = Framer(self.spec)
+        self.go = self._last_sync = 0  # a new stream: its first GO / SYNC high is an edge
         self._last_frame_mono = None
         self._rate.clear()
+        if mode == "live":
+            self.recorder.resume_live()
+        else:
+            self.recorder.enabled = False
 
     def _process(self, data: bytes, t_ns: int) -> None:
-        self.recorder.on_chunk(data, t_ns)  # raw first: nothing received is lost
+        try:
+            self.recorder.on_chunk(data, t_ns)  # raw first: nothing received is lost
+        except RecordingError as exc:  # reported on the status; decoding goes on
+            log.error("recording failed: %s", exc)
         frames = self.framer.feed(data)
         if not frames:
             return
         decode = self.decoder.decode
+        rec = self.recorder
         msgs = []
-        sync_edges = []
+        sync_edges: list[tuple[dict[str, Any], str | None]] = []
         for fr in frames:
             m = decode(fr)
             m["t_ns"] = t_ns
+            sync_edge = bool(m["sync"] and not self._last_sync)
+            self._last_sync = m["sync"]
+            if sync_edge and m["go"] < self.go:  # GO falls on this frame: it ends the recording
+                sync_edges.append((m, rec.current))
+                sync_edge = False
             if m["go"] != self.go:
                 self.go = m["go"]
-                self.recorder.on_go_edge(bool(self.go))
-            if m["sync"] and not self._last_sync:
-                sync_edges.append(m)
-            self._last_sync = m["sync"]
+                rec.on_go_edge(bool(self.go))
+            if sync_edge:
+                sync_edges.append((m, rec.current))
             msgs.append(m)
         self.rx_good = msgs[-1]["rx_good"]
         if self.site is not None:
             self._add_site_columns(msgs)
         for proc in self.processors:
-            proc(msgs)
+            try:
+                proc(msgs)
+            except Exception:  # noqa: BLE001 - one failing extra must not stop the others
+                self.processing_errors += 1
+                log.exception("processor %r failed", proc)
         now = time.monotonic()
         self._last_frame_mono = now
-        self._rate.append((now, len(msgs)))
+        r = self._rate  # mutated by this thread only
+        r.append((now, len(msgs)))
+        while now - r[0][0] > 2.0:
+            r.popleft()
         numbered = self.history.append(msgs, encode_message)
-        for m in sync_edges:
-            self.recorder.on_sync(SyncEvent(seq=m["seq"], tod_s=m["tod_s"], t_ns=t_ns,
-                                            msg_seq=m["msg_seq"], recording=None))
+        for m, rec_id in sync_edges:
+            rec.on_sync(SyncEvent(seq=m["seq"], tod_s=m["tod_s"], t_ns=t_ns,
+                                  msg_seq=m["msg_seq"], recording=rec_id))
         self.publish(numbered)
 
     def _add_site_columns(self, msgs: list[dict[str, Any]]) -> None:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..geometry import Site
+from ..errors import RecordingError
 from ..recording import RecordingWriter
 from ..spec import FrameSpec
 
@@ -38,7 +39,13 @@ class SyncEvent:
 
 
 class Recorder:
-    """Opens a new ``.rdrlog`` per GO period (``auto="go"``), on request, or continuously."""
+    """Opens a new ``.rdrlog`` per GO period (``auto="go"``), on request, or continuously.
+
+    The pre-roll ring always holds the last ``preroll_s`` of chunks (and never less than
+    the chunk being decoded plus one frame), so a recording opened by an edge found in
+    that chunk starts before the frame that holds the edge, even when GO fell and rose
+    again within one read.
+    """
 
     def __init__(self, data_dir: Path, spec: FrameSpec, site: Site | None, source: str,
                  auto: str = "go", preroll_s: float = 2.0) -> None:
@@ -49,26 +56,47 @@ class Recorder:
         self.spec, self.site, self.source, self.auto = spec, site, source, auto
         self.preroll_s = preroll_s
         self._pre: deque[tuple[int, bytes]] = deque()
+        self._pre_bytes = 0
         self._writer: RecordingWriter | None = None
         self._lock = threading.Lock()
         self._manual = False
         self.enabled = True  # False while replaying: replayed bytes are not recorded again
         self.sync_events: list[SyncEvent] = []
-        self._sync_file: Any = None
+        self.last_error: str | None = None
         if auto == "always":
             self.start(reason="always")
 
     # -- called by the reader thread ---------------------------------------------------------
     def on_chunk(self, data: bytes, t_ns: int) -> None:
+        """Keep the chunk in the pre-roll and append it to the open recording.
+
+        A failing disk closes the recording (reported in ``last_error``) and raises
+        RecordingError; the caller carries on decoding.
+        """
         with self._lock:
             if not self.enabled:
                 return
-            if self._writer is not None:
-                self._writer.write(data, t_ns)
-                return
             self._pre.append((t_ns, data))
-            while self._pre and t_ns - self._pre[0][0] > self.preroll_s * 1e9:
-                self._pre.popleft()
+            self._pre_bytes += len(data)
+            keep = len(data) + self.spec.length  # the frame in progress may start earlier
+            while (len(self._pre) > 1 and t_ns - self._pre[0][0] > self.preroll_s * 1e9
+                   and self._pre_bytes - len(self._pre[0][1]) >= keep):
+                self._pre_bytes -= len(self._pre.popleft()[1])
+            if self._writer is not None:
+                try:
+                    self._writer.write(data, t_ns)
+                except RecordingError as exc:
+                    self._fail(exc)
+                    raise
+
+    def _fail(self, exc: Exception) -> None:
+        self.last_error = str(exc)
+        w, self._writer = self._writer, None
+        if w is not None:
+            try:
+                w.close()
+            except (OSError, RecordingError):
+                pass
 
     def on_go_edge(self, rising: bool) -> None:
         if self.auto != "go" or self._manual or not self.enabled:
@@ -79,48 +107,56 @@ class Recorder:
             self.stop()
 
     def on_sync(self, ev: SyncEvent) -> None:
+        """Index a sync event (``ev.recording``: the recording that holds its frame)."""
         with self._lock:
-            ev.recording = self.current
             self.sync_events.append(ev)
             if len(self.sync_events) > 100_000:
                 del self.sync_events[:10_000]
-            if self._sync_file is not None:
-                self._sync_file.write(json.dumps(ev.as_dict()) + "\n")
-                self._sync_file.flush()
+        if ev.recording is not None:
+            try:
+                with open(self.dir / f"{ev.recording}.sync.jsonl", "a", encoding="utf-8") as f:
+                    f.write(json.dumps(ev.as_dict()) + "\n")
+            except OSError as exc:
+                self.last_error = f"cannot write the sync index of {ev.recording}: {exc.strerror}"
 
     # -- control ---------------------------------------------------------------------------
     def start(self, reason: str = "manual") -> str:
         """Open a new recording (with the pre-roll); returns its id. No-op if one is open."""
         with self._lock:
-            if self._writer is not None:
-                return self._writer.path.stem
+            if self._writer is None:
+                stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+                path = self.dir / f"{stamp}.rdrlog"
+                k = 1
+                while path.exists():
+                    path = self.dir / f"{stamp}-{k}.rdrlog"
+                    k += 1
+                writer = RecordingWriter(path, self.spec, site=self.site, source=self.source,
+                                         extra={"started_by": reason})
+                for t, d in self._pre:
+                    writer.write(d, t)
+                self._writer = writer
+                self.last_error = None
             if reason == "manual":
-                self._manual = True
-            stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-            path = self.dir / f"{stamp}.rdrlog"
-            k = 1
-            while path.exists():
-                path = self.dir / f"{stamp}-{k}.rdrlog"
-                k += 1
-            self._writer = RecordingWriter(path, self.spec, site=self.site, source=self.source,
-                                           extra={"started_by": reason})
-            for t, d in self._pre:
-                self._writer.write(d, t)
-            self._pre.clear()
-            self._sync_file = open(path.with_suffix(".sync.jsonl"), "a", encoding="utf-8")
-            return path.stem
+                self._manual = True  # a GO fall no longer ends it
+            return self._writer.path.stem
 
     def stop(self) -> str | None:
         with self._lock:
             self._manual = False
             w, self._writer = self._writer, None
-            if self._sync_file is not None:
-                self._sync_file.close()
-                self._sync_file = None
             if w is None:
                 return None
             w.close()
             return w.path.stem
+
+    def resume_live(self) -> None:
+        """Back from a replay: recording is enabled again (and restarts in ``always`` mode)."""
+        self.enabled = True
+        with self._lock:
+            self._pre.clear()
+            self._pre_bytes = 0
+        if self.auto == "always":
+            self.start(reason="always")
 
     @property
     def current(self) -> str | None:

@@ -54,7 +54,10 @@ class ReplayController:
                     "chunk": self._i, "chunks": len(self._index)}
 
     def open(self) -> None:
-        self._f = open(self.path, "rb")
+        try:
+            self._f = open(self.path, "rb")
+        except OSError as exc:
+            raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from None
         self._anchor = None
 
     def close(self) -> None:
@@ -123,5 +126,11 @@ class ReplayController:
             time.sleep(min(max(wait, 0.0), timeout_s))
             return b""
         off, _, length = entry
-        self._f.seek(off + 20)  # chunk header: magic, t_ns, length, crc
-        return self._f.read(length)
+        try:
+            self._f.seek(off + 20)  # chunk header: magic, t_ns, length, crc
+            data = self._f.read(length)
+        except OSError as exc:
+            raise SourceError(f"reading recording {self.path.name}: {exc.strerror}") from None
+        if len(data) != length:
+            raise SourceError(f"recording {self.path.name} changed under the replay")
+        return data

@@ -1,0 +1,160 @@
+"""The acquisition pipeline's edge cases: recorder edges, failures, sync attribution, replay."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import independent
+from radar_io.recording import RecordingReader, RecordingWriter
+from radar_io.service.acquisition import Acquisition
+from radar_io.service.history import History
+from radar_io.service.recorder import Recorder
+from radar_io.service.replay import ReplayController
+
+from .test_live_pty import wait_for
+
+GO, GO_SYNC, IDLE, SYNC = 0x0005, 0x8005, 0x0004, 0x8004
+
+
+def pipeline(tmp_path, spec, preroll_s: float = 2.0, source: str = "loop://"):
+    rec = Recorder(tmp_path / "data", spec, None, source, auto="go", preroll_s=preroll_s)
+    published: list = []
+    acq = Acquisition(source, spec, rec, History(10_000), published.extend)
+    return acq, rec, published
+
+
+def frames(sts: list[int], seq0: int = 0) -> list[bytes]:
+    return [independent.frame(seq=seq0 + i, sr=1000 + seq0 + i, sts=s) for i, s in enumerate(sts)]
+
+
+def recorded(rec: Recorder, rec_id: str) -> bytes:
+    with RecordingReader(rec.dir / f"{rec_id}.rdrlog") as r:
+        return b"".join(c.data for c in r)
+
+
+def test_go_falling_and_rising_within_one_read(tmp_path, spec):
+    acq, rec, _ = pipeline(tmp_path, spec)
+    fr = frames([IDLE, GO, GO, IDLE, GO, GO])
+    acq._process(b"".join(fr[:3]), 1)
+    first = rec.current
+    acq._process(b"".join(fr[3:]), 2)  # GO falls and rises again in this one chunk
+    second = rec.current
+    rec.stop()
+    assert first and second and first != second
+    assert fr[1] + fr[2] in recorded(rec, first)
+    data = recorded(rec, second)
+    assert fr[4] + fr[5] in data  # the new GO period is whole
+
+
+def test_preroll_zero_keeps_the_frame_split_across_reads(tmp_path, spec):
+    acq, rec, _ = pipeline(tmp_path, spec, preroll_s=0.0)
+    f = frames([IDLE, GO, GO])
+    acq._process(f[0] + f[1][:10], 1)
+    acq._process(f[1][10:] + f[2], 2_000_000_000)  # 2 s later: beyond any pre-roll
+    rid = rec.stop()
+    assert f[1] + f[2] in recorded(rec, rid)
+
+
+def test_sync_edge_on_the_go_falling_frame_belongs_to_the_closing_recording(tmp_path, spec):
+    acq, rec, _ = pipeline(tmp_path, spec)
+    acq._process(b"".join(frames([GO, GO])), 1)
+    rid = rec.current
+    acq._process(b"".join(frames([SYNC, IDLE], seq0=2)), 2)  # GO falls as SYNC rises
+    assert rec.current is None
+    assert rec.sync_events[-1].recording == rid
+    assert (rec.dir / f"{rid}.sync.jsonl").read_text().count("\n") == 1
+
+
+def test_a_failing_disk_never_stops_decoding(tmp_path, spec):
+    acq, rec, published = pipeline(tmp_path, spec)
+    acq._process(b"".join(frames([GO, GO])), 1)
+    os.close(rec._writer._fd)  # the disk goes away under the open recording
+    acq._process(b"".join(frames([GO, GO, GO], seq0=2)), 2)
+    assert len(published) == 5  # every frame still decoded and published
+    st = acq.status()
+    assert st["recording_error"] and rec.current is None
+    acq._process(b"".join(frames([GO], seq0=5)), 3)
+    assert len(published) == 6
+
+
+def test_manual_start_during_a_go_recording_survives_the_go_fall(tmp_path, spec):
+    acq, rec, _ = pipeline(tmp_path, spec)
+    acq._process(b"".join(frames([GO, GO])), 1)
+    rid = rec.start("manual")
+    acq._process(b"".join(frames([IDLE, IDLE], seq0=2)), 2)
+    assert rec.current == rid  # manual: the GO fall does not end it
+    assert rec.stop() == rid
+
+
+def test_reader_survives_a_vanished_replay_and_goes_back_live(tmp_path, spec):
+    p = tmp_path / "r.rdrlog"
+    with RecordingWriter(p, spec) as w:
+        w.write(b"".join(frames([GO] * 10)), 1)
+    ctl = ReplayController(p, 0)
+    p.unlink()  # gone before the reader opens it
+    acq, rec, published = pipeline(tmp_path, spec, source="sim://?rate_hz=200")
+    acq.start()
+    try:
+        acq.switch_source(ctl, "replay")
+        wait_for(lambda: acq.mode == "replay" and acq.last_error, what="replay failure reported")
+        assert acq._thread.is_alive()
+        from radar_io.sources import open_source
+
+        acq.switch_source(open_source("sim://?rate_hz=200"), "live")
+        n = len(published)
+        wait_for(lambda: acq.mode == "live" and len(published) > n + 50, what="live again")
+    finally:
+        acq.stop()
+        rec.close()
+
+
+def test_a_damaged_chunk_length_skips_one_chunk_not_the_rest(tmp_path, spec):
+    p = tmp_path / "d.rdrlog"
+    with RecordingWriter(p, spec) as w:
+        for i in range(30):
+            w.write(bytes([i]) * 100, i)
+    with RecordingReader(p) as r:
+        off = [c.offset for c in r][10]
+    raw = bytearray(p.read_bytes())
+    raw[off + 13] ^= 0x40  # chunk 10 now claims 4 MiB more than the file holds
+    p.write_bytes(bytes(raw))
+    with RecordingReader(p) as r:
+        got = [c.data[0] for c in r]
+        assert got == [i for i in range(30) if i != 10]
+        assert r.report.corrupt_chunks == 1 and r.report.torn_tail_bytes == 0
+
+
+def test_status_rate_is_safe_to_read_while_frames_arrive(tmp_path, spec):
+    import threading
+
+    acq, rec, _ = pipeline(tmp_path, spec)
+    stop = threading.Event()
+    errors: list = []
+
+    def reader() -> None:
+        while not stop.is_set():
+            try:
+                acq.status()
+            except Exception as exc:  # noqa: BLE001
+                errors.append(exc)
+
+    th = threading.Thread(target=reader)
+    th.start()
+    t_end = time.monotonic() + 1.0
+    k = 0
+    while time.monotonic() < t_end:
+        acq._process(independent.frame(seq=k & 0xFFFF, sts=GO), time.time_ns())
+        k += 1
+    stop.set()
+    th.join()
+    rec.close()
+    assert not errors and acq.rate_hz() > 0
+
+
+def test_azimuth_never_reads_360(spec):
+    from radar_io.geometry import radar_sea
+
+    assert float(radar_sea(1.0, -1e-20, 0.0)[2]) == 0.0
+    assert 0.0 <= float(radar_sea(1.0, -1e-14, 0.0)[2]) < 360.0
+    assert float(radar_sea(-1.0, 0.0, 0.0)[2]) == 180.0
