@@ -19,19 +19,25 @@ from ..spec import FrameSpec
 
 def radar_at_sync_events(path: str | os.PathLike[str], spec: FrameSpec | None = None
                          ) -> list[dict[str, Any]]:
-    """One entry per SYNC 0→1 edge, in order: index, SEQ, TOD and SR'/EL'/AZ' (None when NG)."""
+    """One entry per SYNC 0→1 edge, in order: index, SEQ, TOD and SR'/EL'/AZ' (None when NG).
+
+    A recording that starts with SYNC already high holds a shutter event whose instant was
+    not seen: it is counted (so the numbering follows the shutter count) but marked
+    ``complete: false`` with no readings, and cannot be paired with a photo.
+    """
     events: list[dict[str, Any]] = []
-    last = 0
+    last = -1  # before the first frame
     for b in iter_decode(iter_payloads(path), spec=spec):
         if not len(b):
             continue
         sync = b["sync"].astype(np.int8)
         prev = np.concatenate(([last], sync[:-1]))
-        for i in np.flatnonzero((sync == 1) & (prev == 0)).tolist():
-            good = bool(b["rx_good"][i])
+        for i in np.flatnonzero((sync == 1) & (prev != 1)).tolist():
+            complete = bool(prev[i] == 0)
+            good = bool(b["rx_good"][i]) and complete
             events.append({
                 "sync_index": len(events), "seq": int(b["seq"][i]), "tod_s": float(b["tod_s"][i]),
-                "rx_good": good,
+                "complete": complete, "rx_good": good,
                 "sr_m": float(b["sr_c_m"][i]) if good else None,
                 "el_deg": float(b["el_c_deg"][i]) if good else None,
                 "az_deg": float(b["az_c_deg"][i]) if good else None,

@@ -183,7 +183,8 @@ class ReferencePath:
         return x, y, self.height(s)
 
     def deviation(self, x_m: Any, y_m: Any, h_m: Any) -> dict[str, np.ndarray]:
-        """``dy_m``, ``dz_m``, ``along_m``, ``leg`` of positions (NaN / -1 where a coordinate is NaN)."""
+        """``dy_m``, ``dz_m``, ``along_m``, ``leg`` of positions: NaN / -1 where X or Y is NaN;
+        a NaN height alone leaves the horizontal answer and makes only ``dz_m`` NaN."""
         x, y, h = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (x_m, y_m, h_m)))
         shape = x.shape
         x, y, h = x.ravel(), y.ravel(), h.ravel()

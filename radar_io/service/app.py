@@ -291,14 +291,15 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
     @app.get("/api/sync-events", tags=["recordings"])
     def sync_events(recording: str | None = None, limit: int = Query(1000, ge=1, le=100000)
                     ) -> list[dict[str, Any]]:
-        """Sync (camera shutter) events: SYNC 0→1 edges with SEQ, TOD and receive time."""
+        """Sync (camera shutter) events: SYNC 0→1 edges. Live (no ``recording``): as seen,
+        with SEQ, TOD, receive time and the recording that holds them. For a recording: its
+        edges decoded from the file, numbered by ``sync_index`` — the numbering
+        POST /api/calibration/bias uses — with the radar's SR'/EL'/AZ' at each."""
         if recording is not None:
-            p = svc.recording_path(recording).with_suffix(".sync.jsonl")
-            if not p.exists():
-                return []
-            import json
+            from ..calibration.sync_pairs import radar_at_sync_events
 
-            return [json.loads(line) for line in p.read_text().splitlines() if line][-limit:]
+            events = radar_at_sync_events(svc.recording_path(recording), svc.spec)
+            return [{**e, "recording": recording} for e in events][:limit]
         return [e.as_dict() for e in svc.recorder.sync_events[-limit:]]
 
     @app.post("/api/recordings/start", tags=["control"], dependencies=control)
@@ -419,6 +420,9 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
                 raise HTTPException(422, f"observation {k}: recording {ob.recording} has "
                                     f"{len(evs)} sync events, no index {ob.sync_index}")
             ev = evs[ob.sync_index]
+            if not ev["complete"]:
+                raise HTTPException(422, f"observation {k}: sync event {ob.sync_index} of "
+                                    f"{ob.recording} began before the recording")
             if not ev["rx_good"]:
                 raise HTTPException(422, f"observation {k}: the radar was NG at sync event "
                                     f"{ob.sync_index} of {ob.recording}")

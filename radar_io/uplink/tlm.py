@@ -148,10 +148,10 @@ def channel_words(ch: ChannelSpec, values: np.ndarray, full_count: int
         return np.zeros(n, dtype=np.uint16), none, none
     if ch.scaling == "raw_bits":
         return (v.astype(np.int64) & 0xFFFF).astype(np.uint16), none, none
-    bad = ~np.isfinite(v)
+    bad = np.isnan(v)  # no value: sent as 0, counted unavailable; ±inf saturates
     with np.errstate(invalid="ignore"):
-        counts = np.rint(np.where(bad, 0.0, v) / ch.full_scale * full_count)
-    sat = np.abs(counts) > full_count
+        counts = np.rint(np.clip(np.where(bad, 0.0, v) / ch.full_scale, -2.0, 2.0) * full_count)
+        sat = np.abs(v) > ch.full_scale
     counts = np.clip(counts, -full_count, full_count).astype(np.int64)
     return (counts & 0xFFFF).astype(np.uint16), sat, bad
 

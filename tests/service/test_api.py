@@ -130,6 +130,8 @@ def test_validation_errors_are_422_with_a_reason(svc):
 
 def test_recordings_list_download_404_and_traversal(svc):
     rec = wait_for(lambda: svc.get("/api/status")["recording"], what="GO-edge recording")
+    wait_for(lambda: sum(e["recording"] == rec for e in svc.get("/api/sync-events")) >= 2,
+             what="two shutter events in the recording")
     code, doc = call(svc, "POST", "/api/recordings/stop")
     assert code == 200 and doc["closed"] == rec
     lst = svc.get("/api/recordings")
@@ -237,13 +239,15 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
     with RecordingReader(svc.data / "recordings" / f"{rec}.rdrlog") as r:
         b = decode_bytes(b"".join(c.data for c in r))
     s = b["sync"].astype(int)
-    edges = np.flatnonzero((s[1:] == 1) & (s[:-1] == 0)) + 1
-    if s[0] == 1:
-        edges = np.concatenate(([0], edges))
-    edges = [i for i in edges if b["rx_good"][i]][:3]
-    assert len(edges) >= 2
+    edges = list(np.flatnonzero((s[1:] == 1) & (s[:-1] == 0)) + 1)
+    if s[0] == 1:  # began before the recording: counted, never paired
+        edges = [0] + edges
+    usable = [(k, i) for k, i in enumerate(edges) if b["rx_good"][i] and i > 0][:3]
+    assert len(usable) >= 2
+    listed = svc.get(f"/api/sync-events?recording={rec}")
+    assert [e["seq"] for e in listed] == [int(b["seq"][i]) for i in edges]
     obs = []
-    for k, i in enumerate(edges):
+    for k, i in usable:
         obs.append({"group": "f1" if k % 2 == 0 else "f2", "recording": rec, "sync_index": k,
                     "photo_sr_m": float(b["sr_c_m"][i]) + 5.0,
                     "photo_el_deg": float(b["el_c_deg"][i]) + 0.01,
@@ -251,11 +255,11 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
     code, doc = call(svc, "POST", "/api/calibration/bias", {"id": "photo-1", "observations": obs})
     assert code == 200, doc
     comb = doc["statistics"]["combined"]
-    assert comb["n"] == len(edges)
+    assert comb["n"] == len(usable)
     assert comb["dsr_m"]["mean"] == pytest.approx(5.0, abs=1e-9)
     assert comb["del_deg"]["mean"] == pytest.approx(0.01, abs=1e-12)
     assert comb["daz_deg"]["mean"] == pytest.approx(-0.02, abs=1e-9)
-    assert [p["seq"] for p in doc["pairs"]] == [int(b["seq"][i]) for i in edges]
+    assert [p["seq"] for p in doc["pairs"]] == [int(b["seq"][i]) for _, i in usable]
     assert svc.get("/api/status")["calibration"] != "photo-1"  # proposed, not applied
     code, _ = call(svc, "PUT", "/api/calibration", doc["calibration"])
     assert code == 200 and svc.get("/api/status")["calibration"] == "photo-1"

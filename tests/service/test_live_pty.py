@@ -39,7 +39,7 @@ def wait_for(pred, timeout_s: float = 20.0, what: str = "condition"):
 
 def test_1000_frames_per_s_reach_19_readers_intact_with_one_client_stalled(tmp_path):
     cfg = tmp_path / "serve.toml"
-    cfg.write_text('ws_queue_size = 300\nauto_record = "manual"\n')
+    cfg.write_text('ws_queue_size = 3000\nauto_record = "manual"\n')
     pty = Pty()
     svc = ServeProcess(pty.path, tmp_path / "data", extra=("--config", str(cfg)))
     try:
@@ -77,7 +77,7 @@ def test_a_stalled_client_drops_its_own_display_updates_only(tmp_path):
     import websockets
 
     cfg = tmp_path / "serve.toml"
-    cfg.write_text('ws_queue_size = 200\nauto_record = "always"\n')
+    cfg.write_text('ws_queue_size = 2000\nauto_record = "always"\n')
     svc = ServeProcess("sim://?rate_hz=4000&ng_per_min=0", tmp_path / "data",
                        extra=("--config", str(cfg)))
     from radar_io.service.loadtest import _stalled

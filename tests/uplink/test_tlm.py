@@ -258,3 +258,15 @@ def test_spec_errors(tmp_path):
     bad.write_text(text.replace("full_scale = 500.0", "full_scale = -500.0"))
     with pytest.raises(SpecError, match="full_scale must be a positive"):
         load_tlm_spec(bad)
+
+
+def test_infinities_saturate_and_just_over_full_scale_counts():
+    from radar_io.uplink.tlm import channel_words, load_tlm_spec
+
+    spec = load_tlm_spec()
+    dy = next(c for c in spec.channels if c.name == "dy")
+    w, sat, bad = channel_words(dy, np.array([np.inf, -np.inf, 500.005, 499.99, np.nan]),
+                                spec.full_scale_count)
+    assert w.view(np.int16).tolist() == [32767, -32767, 32767, 32766, 0]
+    assert sat.tolist() == [True, True, True, False, False]
+    assert bad.tolist() == [False, False, False, False, True]
