@@ -51,6 +51,7 @@ def cmd_decode(args: argparse.Namespace) -> int:
     from .recording import ReadReport, iter_payloads
 
     common = _load_common(args)
+    path, tlm, da = _guidance_outputs(args)  # bad options fail before any output is created
     fmt = args.format or ("jsonl" if args.output and args.output.endswith((".jsonl", ".json"))
                           else "csv")
     if args.input != "-" and not os.path.exists(args.input):
@@ -70,7 +71,6 @@ def cmd_decode(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise ConfigError(f"cannot write {args.output}: {exc.strerror}") from None
     stats: dict[str, int] = {}
-    path, tlm, da = _guidance_outputs(args)
     try:
         writer = None
         for batch in iter_decode(chunks, **common):
@@ -133,8 +133,8 @@ def _guidance_outputs(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 
 
 def _progress(progress: Any, done: int, total: int, state: dict[str, Any]) -> None:
-    progress.update(done, f"{state['frames']} frames")
     progress.total = total
+    progress.update(done, f"{state['frames']} frames")
 
 
 # ---------------------------------------------------------------- simulate
