@@ -267,3 +267,35 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
                      {"id": "x", "observations": [{**obs[0], "sync_index": 999}]})
     assert code == 422 and "no index 999" in doc["detail"]
     call(svc, "PUT", "/api/calibration", {"id": "zero", "biases": {}})
+
+
+def test_dashboard_calibration_panel_estimates_and_applies(svc, tmp_path):
+    """In Chromium: paste photo observations, estimate, review, apply with the token."""
+    from .cdp import Chrome
+
+    rec = call(svc, "POST", "/api/recordings/start")[1]["recording"]
+    time.sleep(2.6)
+    call(svc, "POST", "/api/recordings/stop")
+    events = [e for e in svc.get(f"/api/sync-events?recording={rec}") if e["rx_good"]][:2]
+    assert len(events) == 2
+    rows = ["group,recording,sync_index,photo_sr_m,photo_el_deg,photo_az_deg"]
+    for e in events:
+        rows.append(f"f1,{rec},{e['sync_index']},{e['sr_m'] + 7.0},{e['el_deg']},{e['az_deg']}")
+    chrome = Chrome(tmp_path / "chrome")
+    try:
+        chrome.navigate(svc.base + "/")
+        chrome.eval("document.getElementById('calibration').open = true, true")
+        chrome.eval(f"document.getElementById('token').value = {json.dumps(TOKEN)}, true")
+        chrome.eval(f"document.getElementById('obs').value = {json.dumps(chr(10).join(rows))}, true")
+        chrome.eval("document.getElementById('cal-id').value = 'panel-cal', true")
+        chrome.eval("document.getElementById('estimate').click(), true")
+        chrome.wait_for("document.getElementById('cal-result').textContent.includes('combined')", 20)
+        text = chrome.eval("document.getElementById('cal-result').textContent")
+        assert "ΔSR 7.0000" in text
+        assert svc.get("/api/status")["calibration"] != "panel-cal"  # reviewed, not yet applied
+        chrome.eval("document.getElementById('apply').click(), true")
+        wait_for(lambda: svc.get("/api/status")["calibration"] == "panel-cal", what="applied")
+        chrome.wait_for("document.getElementById('cal-active').textContent === 'panel-cal'", 5)
+    finally:
+        chrome.close()
+        call(svc, "PUT", "/api/calibration", {"id": "zero", "biases": {}})
