@@ -304,13 +304,14 @@ class BatchFramer:
             accepted_mask = valid
         apos = cand[accepted_mask]
         # failures count only where the scan actually visits them: not inside an accepted frame
-        fails = ~valid
-        if apos.size:
-            j = np.searchsorted(apos, cand, side="right") - 1
-            covered = (j >= 0) & (cand < apos[np.maximum(j, 0)] + L)
-            fails &= ~covered
-        st.crc_errors += int(np.count_nonzero(fails & ~crc))
-        st.implausible += int(np.count_nonzero(fails & crc))
+        fail = np.flatnonzero(~valid)
+        if apos.size and fail.size:
+            fpos = cand[fail]
+            j = np.searchsorted(apos, fpos, side="right") - 1
+            fail = fail[(j < 0) | (fpos >= apos[np.maximum(j, 0)] + L)]
+        n_crc = int(np.count_nonzero(~crc[fail]))
+        st.crc_errors += n_crc
+        st.implausible += fail.size - n_crc
         end = max(limit, int(apos[-1]) + L) if apos.size else limit
         st.bytes_discarded += end - pos - L * apos.size
         if apos.size:

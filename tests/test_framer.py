@@ -236,3 +236,21 @@ def test_batch_framer_large_damaged_stream_matches_per_frame():
     assert a == b
     assert a[1]["frames"] > 0.7 * 20000 and a[1]["crc_errors"] > 1000
     assert np.all([len(f) == 24 for f in a[0]])
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(damaged_streams, st.integers(1, 97), st.integers(1, 9), st.integers(0, 1000))
+def test_batch_framer_window_and_block_boundaries(data, window, block, seed):
+    """Tiny search windows and fast-path blocks put every boundary inside frames."""
+
+    class Small(BatchFramer):
+        WINDOW_BYTES = window
+        BLOCK_FRAMES = block
+        MIN_BLOCK_FRAMES = 1
+
+    f, out, pos = Small(), [], 0
+    for n in [*chunk_sizes(len(data), seed, 40), len(data)]:
+        out += [r.astype(">u2").tobytes() for r in f.feed(data[pos:pos + n])]
+        pos += n
+    f.flush()
+    assert (out, f.stats.as_dict()) == reference(data)
