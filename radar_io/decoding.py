@@ -198,6 +198,24 @@ def _value_table(f: FieldSpec) -> np.ndarray:
     return f.counts_array(np.arange(1 << f.bits, dtype=np.int64)) * f.lsb
 
 
+def _coalesce(blocks: list[np.ndarray], rows: int) -> Iterator[np.ndarray]:
+    """Blocks joined into pieces of at least ``rows`` rows (a damaged stream yields many small
+    blocks; decoding each alone would be mostly per-call overhead)."""
+    group: list[np.ndarray] = []
+    n = 0
+    for b in blocks:
+        if b.shape[0] >= rows and not group:
+            yield b
+            continue
+        group.append(b)
+        n += b.shape[0]
+        if n >= rows:
+            yield np.concatenate(group)
+            group, n = [], 0
+    if group:
+        yield group[0] if len(group) == 1 else np.concatenate(group)
+
+
 class BatchDecoder:
     """Vectorised decoder of framed words (N, L/2) → columns; the twin of :class:`FrameDecoder`."""
 
@@ -240,7 +258,7 @@ class BatchDecoder:
         out = {c: np.empty(n, dtype=self._dtype(c)) for c in self.columns
                if c not in RUNWAY_COLUMNS and c not in GEODETIC_COLUMNS}
         s = 0
-        for blk in blocks:
+        for blk in _coalesce(blocks, self.BLOCK):
             for k in range(0, blk.shape[0], self.BLOCK):
                 sub = blk[k:k + self.BLOCK]
                 self._decode_into(sub, {c: a[s:s + sub.shape[0]] for c, a in out.items()})

@@ -210,7 +210,7 @@ class BatchFramer:
     BLOCK_FRAMES = 8192
     MIN_BLOCK_FRAMES = 16
     #: bytes searched per damaged-stretch window
-    WINDOW_BYTES = 1 << 16
+    WINDOW_BYTES = 1 << 18
 
     def __init__(self, spec: FrameSpec | None = None) -> None:
         self.spec = spec = spec or load_spec()
