@@ -20,6 +20,7 @@ as an (N, L/2) array of native 16-bit words.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -77,21 +78,25 @@ class Framer:
         self._len = spec.length
         self._crc = crc_function(spec.crc)
         self._crc_at = spec.crc.offset
-        seq = spec.field("seq")
-        self._seq_slice = slice(seq.offset, seq.offset + seq.size)
+        # fields located in the frame read as one big-endian integer: (shift, mask)
+        def at(f: Any) -> tuple[int, int]:
+            return 8 * (spec.length - f.offset - f.size), (1 << (8 * f.size)) - 1
+
+        self._seq_at = at(spec.field("seq"))
         # every word's must-be-zero bits, as one mask over the whole frame
-        self._unused = sum(f.unused_mask << (8 * (spec.length - f.offset - f.size))
-                           for f in spec.fields)
-        self._limits = [(slice(f.offset, f.offset + f.size), f.max_raw)
-                        for f in spec.fields if f.max_raw is not None]
+        self._unused = sum(f.unused_mask << at(f)[0] for f in spec.fields)
+        self._limits = [(*at(f), f.max_raw) for f in spec.fields if f.max_raw is not None]
         self._seq = _SeqTracker()
 
     def plausible(self, frame: bytes) -> bool:
         """Unused bits zero and ``max_raw`` limits respected (CRC not checked here)."""
-        if int.from_bytes(frame, "big") & self._unused:
+        return self._plausible(int.from_bytes(frame, "big"))
+
+    def _plausible(self, v: int) -> bool:
+        if v & self._unused:
             return False
-        for sl, max_raw in self._limits:
-            if int.from_bytes(frame[sl], "big") > max_raw:
+        for shift, mask, max_raw in self._limits:
+            if (v >> shift) & mask > max_raw:
                 return False
         return True
 
@@ -115,12 +120,13 @@ class Framer:
             if (crc(frame) if residue_zero else
                     crc(frame[:crc_at]) ^ int.from_bytes(frame[crc_at:crc_at + 2], "big")):
                 st.crc_errors += 1
-            elif not self.plausible(frame):
+            elif not self._plausible(v := int.from_bytes(frame, "big")):
                 st.implausible += 1
             else:
                 out.append(frame)
                 st.frames += 1
-                st.seq_gaps += self._seq.gaps_scalar(int.from_bytes(frame[self._seq_slice], "big"))
+                shift, mask = self._seq_at
+                st.seq_gaps += self._seq.gaps_scalar((v >> shift) & mask)
                 pos = i + L
                 continue
             st.bytes_discarded += 1
