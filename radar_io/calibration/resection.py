@@ -355,17 +355,23 @@ def _homogeneous(p: np.ndarray) -> np.ndarray:
     return np.hstack([p, np.ones((len(p), 1))])
 
 
+def _direct_linear(src: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """The 3×(k+1) matrix P with uv ~ P·[src, 1] (k = 3: camera matrix, k = 2: homography),
+    by the normalised direct linear transform (SVD null vector)."""
+    ts, tu = _normalising_transform(src), _normalising_transform(uv)
+    sn = _homogeneous(src) @ ts.T
+    un = _homogeneous(uv) @ tu.T
+    k = sn.shape[1]
+    rows = np.zeros((2 * len(src), 3 * k))
+    rows[0::2, 0:k] = sn
+    rows[0::2, 2 * k:] = -un[:, 0:1] * sn
+    rows[1::2, k:2 * k] = sn
+    rows[1::2, 2 * k:] = -un[:, 1:2] * sn
+    return np.linalg.inv(tu) @ np.linalg.svd(rows)[2][-1].reshape(3, k) @ ts
+
+
 def _dlt_start(pts: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    t3, t2 = _normalising_transform(pts), _normalising_transform(uv)
-    xn = _homogeneous(pts) @ t3.T
-    un = _homogeneous(uv) @ t2.T
-    n = len(pts)
-    rows = np.zeros((2 * n, 12))
-    rows[0::2, 0:4] = xn
-    rows[0::2, 8:12] = -un[:, 0:1] * xn
-    rows[1::2, 4:8] = xn
-    rows[1::2, 8:12] = -un[:, 1:2] * xn
-    p = np.linalg.inv(t2) @ np.linalg.svd(rows)[2][-1].reshape(3, 4) @ t3
+    p = _direct_linear(pts, uv)
     m = p[:, :3]
     if np.linalg.det(m) < 0:
         p, m = -p, -m
@@ -379,16 +385,7 @@ def _homography_start(pts: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
     e = np.linalg.svd(pts - centre)[2]
     e1, e2 = e[0], e[1]
     ab = (pts - centre) @ np.stack([e1, e2]).T
-    t1, t2 = _normalising_transform(ab), _normalising_transform(uv)
-    an = _homogeneous(ab) @ t1.T
-    un = _homogeneous(uv) @ t2.T
-    n = len(pts)
-    rows = np.zeros((2 * n, 9))
-    rows[0::2, 0:3] = an
-    rows[0::2, 6:9] = -un[:, 0:1] * an
-    rows[1::2, 3:6] = an
-    rows[1::2, 6:9] = -un[:, 1:2] * an
-    h = np.linalg.inv(t2) @ np.linalg.svd(rows)[2][-1].reshape(3, 3) @ t1
+    h = _direct_linear(ab, uv)
     lam = 0.5 * (np.linalg.norm(h[:, 0]) + np.linalg.norm(h[:, 1]))
     if h[2, 2] < 0:  # the centroid must lie in front of the camera (Z_p > 0)
         lam = -lam
