@@ -37,6 +37,7 @@ from . import __version__
 from .errors import RecordingError
 from .geometry import Site
 from .spec import FrameSpec
+from .textfiles import open_input
 
 FILE_MAGIC = b"RDRLOG\x00\x01"
 CHUNK_MAGIC = b"CHK1"
@@ -175,12 +176,7 @@ class RecordingReader:
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
-        try:
-            self._f: BinaryIO = open(self.path, "rb")
-        except FileNotFoundError:
-            raise RecordingError(f"recording not found: {self.path}") from None
-        except OSError as exc:
-            raise RecordingError(f"cannot open recording {self.path}: {exc.strerror}") from None
+        self._f: BinaryIO = open_input(self.path, "recording", RecordingError)
         self.size = os.fstat(self._f.fileno()).st_size
         self.header = self._read_header()
         self.data_offset = self._f.tell()
@@ -314,15 +310,7 @@ def iter_payloads(path: str | os.PathLike[str], chunk_bytes: int = 1 << 22,
                     setattr(report, k, getattr(report, k) + getattr(r.report, k))
                 report.problems.extend(r.report.problems)
         return
-    try:
-        f = open(path, "rb")
-    except FileNotFoundError:
-        raise RecordingError(f"input not found: {path}") from None
-    except IsADirectoryError:
-        raise RecordingError(f"input is a directory, not a file: {path}") from None
-    except OSError as exc:
-        raise RecordingError(f"cannot read {path}: {exc.strerror}") from None
-    with f:
+    with open_input(path, "input", RecordingError) as f:
         total = os.fstat(f.fileno()).st_size
         done = 0
         while True:

@@ -7,23 +7,33 @@ import json
 import os
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from .errors import ConfigError, RadarIOError
 
 
-def read_text(path: str | os.PathLike[str], what: str,
-              error: type[RadarIOError] = ConfigError) -> tuple[Path, bytes]:
-    """The raw bytes of ``path``; ``what`` names the document in messages (``"site file"``)."""
+def open_input(path: str | os.PathLike[str], what: str,
+               error: type[RadarIOError] = ConfigError) -> BinaryIO:
+    """``path`` opened for binary reading; ``what`` names it in messages (``"site file"``)."""
     p = Path(path)
     try:
-        return p, p.read_bytes()
+        return open(p, "rb")
     except FileNotFoundError:
         raise error(f"{what} not found: {p}") from None
     except IsADirectoryError:
-        raise error(f"{what} {p} is a directory") from None
+        raise error(f"{what} {p} is a directory, not a file") from None
     except OSError as exc:
         raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from None
+
+
+def read_text(path: str | os.PathLike[str], what: str,
+              error: type[RadarIOError] = ConfigError) -> tuple[Path, bytes]:
+    """The raw bytes of ``path``, read whole (errors as :func:`open_input`)."""
+    with open_input(path, what, error) as f:
+        try:
+            return Path(path), f.read()
+        except OSError as exc:
+            raise error(f"cannot read {what} {path}: {exc.strerror or exc}") from None
 
 
 def read_toml(path: str | os.PathLike[str], what: str,
