@@ -4,9 +4,9 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .calibration_set import Calibration, load_calibration, save_calibration
-from .decoding import MeasurementBatch, decode_bytes
-from .errors import (
+from radar_io.decoding.biases import Calibration, load_calibration, save_calibration
+from radar_io.decoding.decoders import MeasurementBatch, decode_bytes
+from radar_io.errors import (
     ConfigError,
     EncodeError,
     RadarIOError,

@@ -9,7 +9,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, BinaryIO
 
-from .errors import ConfigError, RadarIOError
+from radar_io.errors import ConfigError, RadarIOError
 
 
 def open_input(path: str | os.PathLike[str], what: str,

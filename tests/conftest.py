@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 @pytest.fixture(scope="session")
 def spec():
-    from radar_io.spec import load_spec
+    from radar_io.wirespec.frame import load_spec
 
     return load_spec()
 

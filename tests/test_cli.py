@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, run_cli
-from radar_io.decoding import DECODE_COLUMNS, decode_bytes
-from radar_io.recording import RecordingReader
+from radar_io.decoding.decoders import DECODE_COLUMNS, decode_bytes
+from radar_io.recording.rdrlog import RecordingReader
 
 HEADER = ("seq,tod_s,sr_m,dsr_m,el_deg,del_deg,az_deg,daz_deg,go,rx_good,sync,sr_c_m,el_c_deg,"
           "az_c_deg,x_m,y_m,h_m")
@@ -153,8 +153,8 @@ sys.exit(rc)
 
 def test_decode_streams_in_constant_memory(tmp_path, spec):
     """Peak RSS does not grow with the recording: 10× the frames, about the same memory."""
-    from radar_io.recording import RecordingWriter
-    from radar_io.simulator import RadarSimulator, SimConfig
+    from radar_io.recording.rdrlog import RecordingWriter
+    from radar_io.simulation.radar import RadarSimulator, SimConfig
 
     peaks = {}
     for n_blocks in (4, 40):
@@ -179,7 +179,7 @@ def test_simulate_to_a_serial_device_in_real_time():
     import select
     import time
 
-    from radar_io.service.loadtest import Pty
+    from radar_io.benchmarks.service_load import Pty
 
     pty = Pty()
     try:

@@ -10,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import independent
-from radar_io.decoding import DECODE_COLUMNS, BatchDecoder, FrameDecoder, decode_bytes
-from radar_io.encoding import FrameEncoder, encode_frames, raw_words
-from radar_io.framing import BatchFramer
+from radar_io.decoding.decoders import DECODE_COLUMNS, BatchDecoder, FrameDecoder, decode_bytes
+from radar_io.encoding.rdr1 import FrameEncoder, encode_frames, raw_words
+from radar_io.framing.framers import BatchFramer
 
 EXACT = ("seq", "tod_s", "sr_m", "dsr_m", "el_deg", "del_deg", "az_deg", "daz_deg",
          "go", "rx_good", "sync", "sr_c_m", "el_c_deg", "az_c_deg", "auto", "servo_bw", "status_raw")
@@ -76,7 +76,7 @@ def test_independent_frames_decode_identically_in_both_decoders(spec, ws):
        st.floats(-50, 50), st.floats(-1, 1), st.floats(-1, 1))
 def test_per_frame_and_batch_agree_on_arbitrary_frames(spec, bodies, b_sr, b_el, b_az):
     """Arbitrary words (any status, any angles, any biases): the two decoders agree."""
-    from radar_io.calibration_set import Calibration
+    from radar_io.decoding.biases import Calibration
 
     cal = Calibration(dsr_m=b_sr, del_deg=b_el, daz_deg=b_az)
     frames = []
@@ -151,7 +151,7 @@ def test_ng_samples_carry_no_position(spec):
 
 
 def test_calibration_biases_apply_after_compensation(spec):
-    from radar_io.calibration_set import Calibration
+    from radar_io.decoding.biases import Calibration
 
     fr = independent.frame(sr=5000, dsr=0x800 + 41, el=1000, dele=0x800 - 20, az=65530,
                            daz=0x800 + 100, sts=0x0005)
@@ -165,7 +165,7 @@ def test_calibration_biases_apply_after_compensation(spec):
 
 
 def test_batch_decoder_accepts_blocks_and_set_calibration(spec):
-    from radar_io.calibration_set import Calibration
+    from radar_io.decoding.biases import Calibration
 
     data = b"".join(independent.frame(seq=i, sr=1000 + i, sts=5) for i in range(50))
     fw = BatchFramer(spec)

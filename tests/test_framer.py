@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import independent
-from radar_io.framing import BatchFramer, Framer
+from radar_io.framing.framers import BatchFramer, Framer
 
 
 def reference(data: bytes) -> tuple[list[bytes], dict[str, int]]:
@@ -229,7 +229,7 @@ def test_false_sync_inside_a_valid_frame_is_not_counted():
 
 
 def test_batch_framer_large_damaged_stream_matches_per_frame():
-    from radar_io.bench import corrupt_bytes
+    from radar_io.benchmarks.core import corrupt_bytes
 
     data = corrupt_bytes(b"".join(stream(20000, seed=3)), 0.01)
     a, b = run_per_frame(data, [4096] * 200), run_batch(data, [1 << 16] * 20)

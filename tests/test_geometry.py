@@ -7,11 +7,11 @@ import pymap3d
 import pytest
 from pyproj import Transformer
 
-from radar_io.decoding import decode_bytes
-from radar_io.encoding import encode_frames, raw_words
+from radar_io.decoding.decoders import decode_bytes
+from radar_io.encoding.rdr1 import encode_frames, raw_words
 from radar_io.errors import ConfigError
-from radar_io.geometry import Site, geodetic, load_site, radar_sea, radar_xyh, runway_xyh
-from radar_io.spec import spec_dir
+from radar_io.coordinates.transforms import Site, geodetic, load_site, radar_sea, radar_xyh, runway_xyh
+from radar_io.wirespec.frame import spec_dir
 
 rng = np.random.default_rng(42)
 SR = rng.uniform(0, 65000, 2000)
@@ -52,7 +52,7 @@ def test_runway_frame_is_a_rotation_by_the_runway_heading_plus_offset():
 
 
 def test_runway_to_radar_inverts_the_runway_frame():
-    from radar_io.geometry import runway_to_radar
+    from radar_io.coordinates.transforms import runway_to_radar
 
     x, y, h = runway_to_radar(*runway_xyh(SR, EL, AZ, SITE), SITE)
     x0, y0, h0 = radar_xyh(SR, EL, AZ)
@@ -91,7 +91,7 @@ def test_decoder_site_columns_match_the_functions(spec):
     lat, lon, hae = geodetic(b["sr_c_m"], b["el_c_deg"], b["az_c_deg"], SITE)
     np.testing.assert_array_equal(b["lat_deg"], lat)
     assert np.isnan(b["lat_deg"][3]) and np.isnan(b["xr_m"][3])
-    from radar_io.decoding import FrameDecoder
+    from radar_io.decoding.decoders import FrameDecoder
 
     m = FrameDecoder(spec, site=SITE).decode(encode_frames(spec, raw_words(spec, vals))[:24])
     assert m["lat_deg"] == pytest.approx(lat[0], abs=1e-12)

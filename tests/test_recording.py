@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 import independent
-from radar_io.decoding import decode_bytes, iter_decode
+from radar_io.decoding.decoders import decode_bytes, iter_decode
 from radar_io.errors import RecordingError
-from radar_io.geometry import load_site
-from radar_io.recording import (RecordingReader, RecordingWriter, encode_chunk, is_recording,
+from radar_io.coordinates.transforms import load_site
+from radar_io.recording.rdrlog import (RecordingReader, RecordingWriter, encode_chunk, is_recording,
                                 iter_payloads)
-from radar_io.spec import spec_dir
+from radar_io.wirespec.frame import spec_dir
 
 
 def payload(i: int) -> bytes:
@@ -51,8 +51,8 @@ def test_never_overwrites(tmp_path, spec):
 
 WRITER = textwrap.dedent("""
     import sys
-    from radar_io.recording import RecordingWriter
-    from radar_io.spec import load_spec
+    from radar_io.recording.rdrlog import RecordingWriter
+    from radar_io.wirespec.frame import load_spec
     sys.path.insert(0, {tests!r})
     from test_recording import payload
     w = RecordingWriter({path!r}, load_spec(), fsync_interval_s=0.5)

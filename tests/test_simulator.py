@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from radar_io.decoding import decode_bytes
-from radar_io.simulator import FlightScript, RadarSimulator, SimConfig
-from radar_io.sources import SimSource
+from radar_io.decoding.decoders import decode_bytes
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+from radar_io.sources.serial_sim_replay import SimSource
 
 
 def test_compensated_track_recovers_the_truth():

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import independent
-from radar_io.decoding import FrameDecoder, decode_bytes
-from radar_io.encoding import FrameEncoder
+from radar_io.decoding.decoders import FrameDecoder, decode_bytes
+from radar_io.encoding.rdr1 import FrameEncoder
 from radar_io.errors import SpecError
-from radar_io.spec import eval_number, load_spec, spec_dir
+from radar_io.wirespec.frame import eval_number, load_spec, spec_dir
 
 SPEC_TEXT = (spec_dir() / "rdr1.toml").read_text()
 

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration_set import Calibration, utc_now_iso
-from .errors import CalibrationError
+from radar_io.decoding.biases import Calibration, utc_now_iso
+from radar_io.errors import CalibrationError
 
 KEYS = ("dsr_m", "del_deg", "daz_deg")
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
+from radar_io.errors import CalibrationError
 
 SCAN_STEP_DEG = 0.01
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import CalibrationError
+from radar_io.errors import CalibrationError
 
 #: how far (fraction of a cell) a point may lie outside the grid before it is refused
 OUTSIDE_TOLERANCE = 1e-3

@@ -29,7 +29,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .errors import CalibrationError
+from radar_io.errors import CalibrationError
 
 #: EPSG code of zone I per datum; zone k is base + k (k = 1 … 19)
 _ZONE_BASE = {"tokyo": 30160, "jgd2000": 2442, "jgd2011": 6668}

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
-from .resection import PARAM_KEYS, ResectionResult, resect
+from radar_io.errors import CalibrationError
+from radar_io.calibration.resection import PARAM_KEYS, ResectionResult, resect
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import CalibrationError
+from radar_io.errors import CalibrationError
 
 #: height differences (km) over which the source's empirical δ is used; δ turns negative beyond ≈ 3.16 km
 MAX_HEIGHT_DIFFERENCE_KM = 3.0

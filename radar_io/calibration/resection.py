@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import CalibrationError
-from .rotation import angles_from_matrix, rotation_matrix, rotation_partials, wrap_pi
+from radar_io.errors import CalibrationError
+from radar_io.calibration.rotation import angles_from_matrix, rotation_matrix, rotation_partials, wrap_pi
 
 PARAM_KEYS = ("x0_m", "y0_m", "z0_m", "phi_deg", "theta_deg", "psi_deg")
 _TO_API = np.array([1.0, 1.0, 1.0, 180.0 / math.pi, 180.0 / math.pi, 180.0 / math.pi])

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from ..decoding import iter_decode
-from ..recording import iter_payloads
-from ..spec import FrameSpec
+from radar_io.decoding.decoders import iter_decode
+from radar_io.recording.rdrlog import iter_payloads
+from radar_io.wirespec.frame import FrameSpec
 
 
 def radar_at_sync_events(path: str | os.PathLike[str], spec: FrameSpec | None = None

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CalibrationInputError
+from radar_io.errors import CalibrationInputError
 
 
 @dataclass(frozen=True)

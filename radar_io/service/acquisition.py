@@ -18,15 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration_set import Calibration
-from ..decoding import FrameDecoder
-from ..errors import RadarIOError, RecordingError
-from ..framing import Framer
-from ..geometry import Site, geodetic, runway_xyh
-from ..sources import ByteSource, open_source
-from ..spec import FrameSpec
-from .history import History
-from .recorder import Recorder, SyncEvent
+from radar_io.decoding.biases import Calibration
+from radar_io.decoding.decoders import FrameDecoder
+from radar_io.errors import RadarIOError, RecordingError
+from radar_io.framing.framers import Framer
+from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
+from radar_io.sources.serial_sim_replay import ByteSource, open_source
+from radar_io.wirespec.frame import FrameSpec
+from radar_io.service.history import History
+from radar_io.recording.recorder import Recorder, SyncEvent
 
 log = logging.getLogger("radar_io.acquisition")
 

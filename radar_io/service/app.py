@@ -16,17 +16,17 @@ from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, Field
 from starlette.websockets import WebSocketDisconnect
 
-from .. import __version__
-from ..calibration_set import Calibration, load_calibration, save_calibration, utc_now_iso
-from ..errors import ConfigError, RadarIOError
-from ..geometry import load_site
-from ..spec import load_spec
-from .acquisition import Acquisition
-from .config import TOKEN_ENV, ServiceConfig
-from .history import History
-from .hub import Hub
-from .recorder import Recorder
-from .replay import ReplayController
+from radar_io import __version__
+from radar_io.decoding.biases import Calibration, load_calibration, save_calibration, utc_now_iso
+from radar_io.errors import ConfigError, RadarIOError
+from radar_io.coordinates.transforms import load_site
+from radar_io.wirespec.frame import load_spec
+from radar_io.service.acquisition import Acquisition
+from radar_io.service.config import TOKEN_ENV, ServiceConfig
+from radar_io.service.history import History
+from radar_io.service.hub import Hub
+from radar_io.recording.recorder import Recorder
+from radar_io.sources.replay_control import ReplayController
 
 WEB_DIR = Path(__file__).resolve().parent.parent / "web"
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
@@ -98,8 +98,8 @@ class Service:
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
         """Reference path, TLM1 / D/A sinks and CAN air data, as configured."""
-        from ..guidance import load_path
-        from .outputs import AirDataReader, DeviationProcessor, SinkWorker
+        from radar_io.coordinates.reference_path import load_path
+        from radar_io.service.extras import AirDataReader, DeviationProcessor, SinkWorker
 
         self.path = load_path(cfg.path) if cfg.path else None
         if self.path is not None:
@@ -108,7 +108,8 @@ class Service:
             self.acq.processors.append(DeviationProcessor(self.path))
         self.sinks: dict[str, SinkWorker] = {}
         if cfg.tlm_out or cfg.da_out:
-            from ..uplink import DASink, TelemetryEncoder, TelemetrySink
+            from radar_io.sinks.uplink import DASink, TelemetrySink
+            from radar_io.encoding.tlm1 import TelemetryEncoder
 
             if cfg.tlm_out:
                 enc = TelemetryEncoder(cycle_s=cfg.tlm_cycle_s or None)
@@ -138,7 +139,7 @@ class Service:
 
         if self.path is None:
             return None
-        from ..geometry import runway_to_radar
+        from radar_io.coordinates.transforms import runway_to_radar
 
         s = np.append(np.arange(0.0, self.path.length_m, step_m), self.path.length_m)
         x, y, h = self.path.position(s)
@@ -296,7 +297,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         edges decoded from the file, numbered by ``sync_index`` — the numbering
         POST /api/calibration/bias uses — with the radar's SR'/EL'/AZ' at each."""
         if recording is not None:
-            from ..calibration.sync_pairs import radar_at_sync_events
+            from radar_io.calibration.sync_pairs import radar_at_sync_events
 
             events = radar_at_sync_events(svc.recording_path(recording), svc.spec)
             return [{**e, "recording": recording} for e in events][:limit]
@@ -370,7 +371,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
     def replay_stop() -> dict[str, Any]:
         """Back to the live source."""
         _replay()
-        from ..sources import open_source
+        from radar_io.sources.serial_sim_replay import open_source
 
         svc.acq.switch_source(open_source(svc.cfg.source), "live")
         return {"mode": "live", "source": svc.cfg.source}
@@ -404,8 +405,8 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         set, then PUT it to /api/calibration."""
         import numpy as np
 
-        from ..calibration.bias import bias_calibration, bias_statistics, photo_to_radar
-        from ..calibration.sync_pairs import radar_at_sync_events
+        from radar_io.calibration.bias import bias_calibration, bias_statistics, photo_to_radar
+        from radar_io.calibration.sync_pairs import radar_at_sync_events
 
         if not _ID.match(req.id):
             raise HTTPException(422, f"calibration id {req.id!r} must be a plain name")
@@ -450,7 +451,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
             "recordings": sorted(events), "pairs": len(pairs)})
         return {"pairs": pairs, "statistics": stats, "calibration": cal.to_dict()}
 
-    from .runway_routes import router as runway_router
+    from radar_io.service.routers.runway import router as runway_router
 
     app.include_router(runway_router)
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")

@@ -12,9 +12,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from ..errors import ConfigError
-from ..spec import spec_dir
-from ..textfiles import read_toml
+from radar_io.errors import ConfigError
+from radar_io.wirespec.frame import spec_dir
+from radar_io.textfiles import read_toml
 
 TOKEN_ENV = "RADAR_IO_TOKEN"
 

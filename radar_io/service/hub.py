@@ -18,7 +18,7 @@ from typing import Any
 
 from starlette.websockets import WebSocket
 
-from .history import History
+from radar_io.service.history import History
 
 
 class Client:

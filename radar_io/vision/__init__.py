@@ -2,13 +2,13 @@
 
 Implements spec ``runway-vision.md``:
 
-* :mod:`~radar_io.vision.geometry` — the pure, vectorised maths (§1–§3);
+* :mod:`~radar_io.vision.pose_equations` — the pure, vectorised maths (§1–§3);
 * :mod:`~radar_io.vision.chain` — the OpenCV image chain (§4): :func:`find_runway`,
   :class:`RunwayTracker` for sequences;
 * :mod:`~radar_io.vision.manual` — the pose from operator-picked points;
 * :mod:`~radar_io.vision.synth` — forward projector and synthetic image renderer;
-* :mod:`~radar_io.vision.bench` — the chain's frame-rate benchmark;
-* :mod:`~radar_io.vision.cli` — the ``radar-io runway`` sub-command.
+* :mod:`~radar_io.benchmarks.runway` — the chain's frame-rate benchmark;
+* :mod:`~radar_io.cli.runway` — the ``radar-io runway`` sub-command.
 
 Names are imported lazily so that importing the package (which the main CLI does
 for every command) does not load OpenCV.
@@ -19,7 +19,7 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from .errors import VisionError
+from radar_io.errors import VisionError
 
 _LAZY = {
     "ChainParams": "chain",

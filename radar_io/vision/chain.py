@@ -20,9 +20,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from . import geometry as g
-from .errors import VisionError
-from .lines import RefinedLine, binary_edges, hough_candidates, refine_line
+from radar_io.vision import pose_equations as g
+from radar_io.errors import VisionError
+from radar_io.vision.lines import RefinedLine, binary_edges, hough_candidates, refine_line
 
 __all__ = [
     "ChainParams",

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import fit_line
+from radar_io.vision.pose_equations import fit_line
 
 __all__ = ["RefinedLine", "binary_edges", "hough_candidates", "refine_line"]
 

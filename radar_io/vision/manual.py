@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..textfiles import read_json
-from .chain import ChainParams, RunwayResult, pose_from_point_sets
-from .errors import VisionError
+from radar_io.textfiles import read_json
+from radar_io.vision.chain import ChainParams, RunwayResult, pose_from_point_sets
+from radar_io.errors import VisionError
 
 __all__ = ["LINE_KEYS", "load_points", "pose_from_points"]
 

@@ -3,7 +3,7 @@
 The renderer draws, for a known pose, an infinite flat ground plane with a sky
 gradient above its horizon and a light (concrete) runway strip of half-width
 ``d``, using only the pinhole projection of spec eq. (1)–(2)
-(:func:`radar_io.vision.geometry.project_points`) and polygon clipping — never
+(:func:`radar_io.vision.pose_equations.project_points`) and polygon clipping — never
 the inverse formulas — so it is an independent check of them.  Edges are
 anti-aliased by exact pixel-area coverage.  Optional clutter: patchy ground
 texture, haze near the horizon, grey clouds, dark roads on the ground, bright
@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from . import geometry as g
+from radar_io.vision import pose_equations as g
 
 __all__ = ["RunwayPose", "RunwayScene", "expected_lines", "focal_for_fov", "render_runway", "visible_edge_lengths"]
 

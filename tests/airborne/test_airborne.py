@@ -9,9 +9,12 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from radar_io.airborne import (AirborneError, AircraftConfig, AircraftSimulator, CanRecorder,
-                               decode_messages, fit_clock, load_dbc, open_bus, read_can_log)
-from radar_io.simulator import FlightScript, SimConfig
+from radar_io.errors import AirborneError
+from radar_io.simulation.aircraft import AircraftConfig, AircraftSimulator
+from radar_io.sources.canbus import CanRecorder, open_bus
+from radar_io.decoding.airdata import decode_messages, load_dbc, read_can_log
+from radar_io.analysis.clock_alignment import fit_clock
+from radar_io.simulation.radar import FlightScript, SimConfig
 
 
 @pytest.fixture(scope="module")

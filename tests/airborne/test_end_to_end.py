@@ -13,12 +13,14 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, run_cli
-from radar_io.airborne import (AircraftConfig, AircraftSimulator, CanRecorder, align_files,
-                               compare_altitude, fit_clock, open_bus, read_can_log, read_radar_track)
-from radar_io.recording import RecordingWriter
-from radar_io.simulator import FlightScript, RadarSimulator, SimConfig
-from radar_io.sources import SerialSource
-from radar_io.spec import load_spec
+from radar_io.simulation.aircraft import AircraftConfig, AircraftSimulator
+from radar_io.sources.canbus import CanRecorder, open_bus
+from radar_io.analysis.clock_alignment import align_files, compare_altitude, fit_clock, read_radar_track
+from radar_io.decoding.airdata import read_can_log
+from radar_io.recording.rdrlog import RecordingWriter
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+from radar_io.sources.serial_sim_replay import SerialSource
+from radar_io.wirespec.frame import load_spec
 
 TOD0 = 43210.0
 ANTENNA_MSL_M, QNH_HPA = 12.0, 1003.0

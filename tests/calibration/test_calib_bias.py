@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from radar_io.calibration import bias_calibration, bias_statistics, photo_to_radar, wrap_deg
-from radar_io.calibration_set import Calibration
+from radar_io.decoding.biases import Calibration
 
 
 def pstd(values):

@@ -14,7 +14,7 @@ import pyproj
 import pytest
 
 from radar_io.calibration import Pose
-from radar_io.calibration_set import load_calibration
+from radar_io.decoding.biases import load_calibration
 
 from .synthetic import FOCAL_MM, aerial_photo
 

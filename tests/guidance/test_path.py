@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from radar_io.decoding import decode_bytes
+from radar_io.decoding.decoders import decode_bytes
 from radar_io.errors import ConfigError, RadarIOError
-from radar_io.geometry import load_site
-from radar_io.guidance import PathError, ReferencePath, add_deviation, load_path
-from radar_io.simulator import FlightScript, RadarSimulator, SimConfig
+from radar_io.coordinates.transforms import load_site
+from radar_io.coordinates.reference_path import PathError, ReferencePath, add_deviation, load_path
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 
 TOL = 1e-6
 

@@ -14,8 +14,8 @@ import urllib.request
 import pytest
 import websockets
 
-from radar_io.recording import RecordingReader
-from radar_io.service.loadtest import ServeProcess
+from radar_io.recording.rdrlog import RecordingReader
+from radar_io.benchmarks.service_load import ServeProcess
 
 from .test_live_pty import wait_for
 
@@ -231,7 +231,7 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
     """Photo positions offset from the radar by known biases → those biases, then applied live."""
     import numpy as np
 
-    from radar_io.decoding import decode_bytes
+    from radar_io.decoding.decoders import decode_bytes
 
     rec = call(svc, "POST", "/api/recordings/start")[1]["recording"]
     time.sleep(3.6)  # sync every 1 s

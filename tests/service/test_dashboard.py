@@ -5,8 +5,8 @@ from __future__ import annotations
 import threading
 import time
 
-from radar_io.service.loadtest import Pty, ServeProcess, free_port
-from radar_io.simulator import FlightScript, RadarSimulator, SimConfig
+from radar_io.benchmarks.service_load import Pty, ServeProcess, free_port
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 
 from .cdp import Chrome
 from .test_live_pty import ARTIFACTS

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 import uvicorn
 
-from radar_io.airborne.sim import AircraftSimulator
+from radar_io.simulation.aircraft import AircraftSimulator
 from radar_io.service.app import create_app
 from radar_io.service.config import ServiceConfig
-from radar_io.service.loadtest import free_port
-from radar_io.simulator import FlightScript, SimConfig
-from radar_io.spec import spec_dir
+from radar_io.benchmarks.service_load import free_port
+from radar_io.simulation.radar import FlightScript, SimConfig
+from radar_io.wirespec.frame import spec_dir
 
 from .cdp import Chrome
 from .test_live_pty import ARTIFACTS, wait_for

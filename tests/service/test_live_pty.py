@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 import independent
-from radar_io.decoding import DECODE_COLUMNS
-from radar_io.recording import RecordingReader
-from radar_io.service.loadtest import Pty, ServeProcess, run_load
+from radar_io.decoding.decoders import DECODE_COLUMNS
+from radar_io.recording.rdrlog import RecordingReader
+from radar_io.benchmarks.service_load import Pty, ServeProcess, run_load
 
 ARTIFACTS = Path(os.environ.get("RADAR_IO_ARTIFACTS", Path(__file__).resolve().parents[2] / "artifacts"))
 
@@ -80,7 +80,7 @@ def test_a_stalled_client_drops_its_own_display_updates_only(tmp_path):
     cfg.write_text('ws_queue_size = 2000\nauto_record = "always"\n')
     svc = ServeProcess("sim://?rate_hz=4000&ng_per_min=0", tmp_path / "data",
                        extra=("--config", str(cfg)))
-    from radar_io.service.loadtest import _stalled
+    from radar_io.benchmarks.service_load import _stalled
 
     async def main() -> list[int]:
         done, ready = asyncio.Event(), asyncio.Event()

@@ -6,11 +6,11 @@ import os
 import time
 
 import independent
-from radar_io.recording import RecordingReader, RecordingWriter
+from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
 from radar_io.service.acquisition import Acquisition
 from radar_io.service.history import History
-from radar_io.service.recorder import Recorder
-from radar_io.service.replay import ReplayController
+from radar_io.recording.recorder import Recorder
+from radar_io.sources.replay_control import ReplayController
 
 from .test_live_pty import wait_for
 
@@ -99,7 +99,7 @@ def test_reader_survives_a_vanished_replay_and_goes_back_live(tmp_path, spec):
         acq.switch_source(ctl, "replay")
         wait_for(lambda: acq.mode == "replay" and acq.last_error, what="replay failure reported")
         assert acq._thread.is_alive()
-        from radar_io.sources import open_source
+        from radar_io.sources.serial_sim_replay import open_source
 
         acq.switch_source(open_source("sim://?rate_hz=200"), "live")
         n = len(published)
@@ -153,7 +153,7 @@ def test_status_rate_is_safe_to_read_while_frames_arrive(tmp_path, spec):
 
 
 def test_azimuth_never_reads_360(spec):
-    from radar_io.geometry import radar_sea
+    from radar_io.coordinates.transforms import radar_sea
 
     assert float(radar_sea(1.0, -1e-20, 0.0)[2]) == 0.0
     assert 0.0 <= float(radar_sea(1.0, -1e-14, 0.0)[2]) < 360.0

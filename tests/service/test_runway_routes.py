@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from radar_io.service.loadtest import ServeProcess
+from radar_io.benchmarks.service_load import ServeProcess
 from radar_io.vision.synth import RunwayPose, expected_lines, focal_for_fov, render_runway
 
 from .cdp import Chrome

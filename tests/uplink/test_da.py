@@ -8,11 +8,13 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from radar_io.decoding import decode_bytes
+from radar_io.decoding.decoders import decode_bytes
 from radar_io.errors import SpecError
-from radar_io.guidance import ReferencePath, add_deviation
-from radar_io.simulator import FlightScript, RadarSimulator, SimConfig
-from radar_io.uplink import DAEncoder, DASink, UplinkError, decode_da_words, load_da_spec
+from radar_io.coordinates.reference_path import ReferencePath, add_deviation
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+from radar_io.encoding.da import DAEncoder, decode_da_words, load_da_spec
+from radar_io.sinks.uplink import DASink
+from radar_io.errors import UplinkError
 
 # ---- typed in from radar-interface.md §7 and the documented defaults: channel → (column, full scale)
 CHANNELS = [("x_m", 30000.0), ("y_m", 30000.0), ("dsr_m", 50.0), ("del_deg", 1.0),

@@ -11,13 +11,15 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from radar_io.decoding import decode_bytes
+from radar_io.decoding.decoders import decode_bytes
 from radar_io.errors import SpecError
-from radar_io.geometry import load_site
-from radar_io.guidance import ReferencePath, add_deviation
-from radar_io.simulator import FlightScript, RadarSimulator, SimConfig
-from radar_io.uplink import (Kinematics, TelemetryDecoder, TelemetryEncoder, TelemetrySink,
-                             UplinkError, load_tlm_spec)
+from radar_io.coordinates.transforms import load_site
+from radar_io.coordinates.reference_path import ReferencePath, add_deviation
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+from radar_io.encoding.kinematics import Kinematics
+from radar_io.encoding.tlm1 import TelemetryDecoder, TelemetryEncoder, load_tlm_spec
+from radar_io.sinks.uplink import TelemetrySink
+from radar_io.errors import UplinkError
 
 # ---- the independent reference, typed in from radar-interface.md §8
 FRAME = struct.Struct(">HH10hH")
@@ -261,7 +263,7 @@ def test_spec_errors(tmp_path):
 
 
 def test_infinities_saturate_and_just_over_full_scale_counts():
-    from radar_io.uplink.tlm import channel_words, load_tlm_spec
+    from radar_io.encoding.tlm1 import channel_words, load_tlm_spec
 
     spec = load_tlm_spec()
     dy = next(c for c in spec.channels if c.name == "dy")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import cv2
 
-from radar_io.vision.bench import bench_runway
+from radar_io.benchmarks.runway import bench_runway
 
 
 def test_bench_runway_reports_frame_rates_and_restores_threads():

@@ -75,7 +75,7 @@ def test_principal_point_and_camera_offset_options(images):
 
 def test_manual_points(images, tmp_path):
     # exact picks of the rendered pose: horizon from two directions, edges from ground points
-    from radar_io.vision import geometry as g
+    from radar_io.vision import pose_equations as g
 
     pp = (319.5, 239.5)
     b, p, y = POSE.angles_rad

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from radar_io.vision import geometry as g
+from radar_io.vision import pose_equations as g
 
 D = 22.5  # runway half-width [m]
 F = 554.2562584220408  # 640 px across a 60 deg field of view

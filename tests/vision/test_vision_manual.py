@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from radar_io.vision import VisionError
-from radar_io.vision import geometry as g
+from radar_io.vision import pose_equations as g
 from radar_io.vision.manual import load_points, pose_from_points
 from radar_io.vision.synth import RunwayPose, focal_for_fov
 

@@ -1,0 +1,220 @@
+"""End-to-end latency and loss over a real pty: write RDR1 frames into one side of a
+pseudo-terminal at a fixed rate, serve them with ``radar-io serve``, and receive them
+on N websocket clients (one of which never reads). Used by ``radar-io bench`` and the tests.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tty
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from radar_io.simulation.radar import RadarSimulator, SimConfig
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Pty:
+    """A pseudo-terminal pair; ``path`` is the device the service opens."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.path = os.ttyname(self.slave)
+
+    def write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            n = os.write(self.master, view)
+            view = view[n:]
+
+    def close(self) -> None:
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class ServeProcess:
+    """``radar-io serve`` in a child process on 127.0.0.1."""
+
+    def __init__(self, source: str, data_dir: Path, port: int | None = None,
+                 extra: tuple[str, ...] = (), env: dict[str, str] | None = None) -> None:
+        self.port = port or free_port()
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "radar_io.cli", "serve", "--source", source, "--host",
+             "127.0.0.1", "--port", str(self.port), "--data-dir", str(data_dir), *extra],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ, **(env or {})})
+
+    def get(self, path: str) -> Any:
+        with urllib.request.urlopen(self.base + path, timeout=5) as r:
+            return json.loads(r.read())
+
+    def wait_ready(self, timeout_s: float = 30.0, connected: bool = True) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"serve exited: {self.proc.stderr.read().decode()}")
+            try:
+                st = self.get("/api/status")
+                if st["connected"] or not connected:
+                    return st
+            except OSError:
+                pass
+            time.sleep(0.1)
+        raise TimeoutError("service did not become ready")
+
+    def stop(self) -> str:
+        self.proc.terminate()
+        try:
+            _, err = self.proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            _, err = self.proc.communicate()
+        return err.decode(errors="replace")
+
+
+@dataclass
+class LoadResult:
+    frames_written: int
+    write_ns: dict[int, int]
+    received: list[list[tuple[int, int, dict[str, Any]]]] = field(default_factory=list)
+    frames: list[bytes] = field(default_factory=list)
+
+    def latencies_ms(self) -> np.ndarray:
+        lat = [(t - self.write_ns[m["msg_seq"]]) / 1e6
+               for client in self.received for _, t, m in client if m["msg_seq"] in self.write_ns]
+        return np.array(lat)
+
+
+async def _reader(url: str, out: list[tuple[int, int, dict[str, Any]]], n: int,
+                  ready: asyncio.Event, counter: list[int]) -> None:
+    import websockets
+
+    async with websockets.connect(url, max_size=None) as ws:
+        counter[0] += 1
+        if counter[0] >= counter[1]:
+            ready.set()
+        raw = []
+        while len(raw) < n:
+            text = await ws.recv()
+            raw.append((time.time_ns(), text))
+    out.extend((i, t, json.loads(text)) for i, (t, text) in enumerate(raw))
+
+
+async def _stalled(url: str, done: asyncio.Event, ready: asyncio.Event, counter: list[int]) -> None:
+    import websockets
+
+    host, port = url.split("//", 1)[1].split("/", 1)[0].split(":")
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connect: a small window
+    sock.connect((host, int(port)))
+    async with websockets.connect(url, sock=sock, max_size=None, max_queue=1,
+                                  close_timeout=0.1) as ws:
+        ws.transport.pause_reading()  # never read: the server's buffers and queue fill up
+        counter[0] += 1
+        if counter[0] >= counter[1]:
+            ready.set()
+        await done.wait()
+        ws.transport.abort()  # no closing handshake: this client never reads
+
+
+def run_load(pty: Pty, base_ws: str, rate_hz: float = 1000.0, seconds: float = 5.0,
+             clients: int = 20, stalled: int = 1, msg_seq0: int = 0, seed: int = 5) -> LoadResult:
+    """Write ``rate_hz`` frames/s for ``seconds`` into the pty; receive on ``clients`` websockets.
+
+    ``msg_seq0`` is the service's last msg_seq before writing (the k-th frame written
+    becomes message ``msg_seq0 + k + 1``).
+    """
+    n = int(rate_hz * seconds)
+    sim = RadarSimulator(config=SimConfig(seed=seed, rate_hz=rate_hz, go_delay_s=0.0))
+    data, _ = sim.generate(n)
+    frames = [data[i * 24:(i + 1) * 24] for i in range(n)]
+    res = LoadResult(n, {}, [[] for _ in range(clients - stalled)], frames)
+
+    def writer(start: threading.Event) -> None:
+        start.wait()
+        t0 = time.monotonic()
+        for k, fr in enumerate(frames):
+            due = t0 + k / rate_hz
+            while True:
+                d = due - time.monotonic()
+                if d <= 0:
+                    break
+                time.sleep(d if d > 0.002 else 0)
+            res.write_ns[msg_seq0 + k + 1] = time.time_ns()
+            pty.write(fr)
+
+    async def main() -> None:
+        url = f"{base_ws}/ws/live"
+        ready, done = asyncio.Event(), asyncio.Event()
+        counter = [0, clients]
+        tasks = [asyncio.create_task(_reader(url, res.received[i], n, ready, counter))
+                 for i in range(clients - stalled)]
+        stall = [asyncio.create_task(_stalled(url, done, ready, counter)) for _ in range(stalled)]
+        await asyncio.wait_for(ready.wait(), 20)
+        await asyncio.sleep(0.3)
+        start = threading.Event()
+        th = threading.Thread(target=writer, args=(start,), daemon=True)
+        th.start()
+        start.set()
+        try:
+            await asyncio.wait_for(asyncio.gather(*tasks), seconds + 30)
+        finally:
+            done.set()
+            for t in stall:
+                t.cancel()
+            await asyncio.gather(*stall, return_exceptions=True)
+        th.join()
+
+    asyncio.run(main())
+    return res
+
+
+def bench_service(seconds: float = 5.0, clients: int = 20, rate_hz: float = 1000.0
+                  ) -> dict[str, Any]:
+    """p50/p99/max latency (ms) from pty write to websocket receipt, and the loss."""
+    import tempfile
+
+    pty = Pty()
+    with tempfile.TemporaryDirectory() as d:
+        svc = ServeProcess(pty.path, Path(d), extra=("--auto-record", "manual"))
+        try:
+            st = svc.wait_ready()
+            last = svc.get("/api/track?limit=1")["last_msg_seq"]
+            res = run_load(pty, f"ws://127.0.0.1:{svc.port}", rate_hz, seconds, clients,
+                           msg_seq0=last)
+            status = svc.get("/api/status")
+        finally:
+            svc.stop()
+            pty.close()
+    lat = res.latencies_ms()
+    got = sum(len(c) for c in res.received)
+    return {
+        "serve_clients": clients, "serve_rate_hz": rate_hz,
+        "serve_latency_p50_ms": float(np.percentile(lat, 50)),
+        "serve_latency_p99_ms": float(np.percentile(lat, 99)),
+        "serve_latency_max_ms": float(lat.max()),
+        "serve_messages_expected": res.frames_written * (clients - 1),
+        "serve_messages_received": got,
+        "serve_ws_dropped_for_stalled_client": status["ws_dropped"],
+        "serve_frames": status["frames"] - st["frames"],
+    }

@@ -1,0 +1,124 @@
+"""Coordinates of radar-interface.md §5: radar rectangular, runway, geodetic.
+
+Pure functions, vectorised over numpy arrays (scalars work too). Angles in
+degrees, distances in metres. Radar rectangular frame: origin at the antenna,
+X north, Y east, H up (left-handed; Z = -H is the right-handed down axis).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pymap3d
+
+from radar_io.errors import ConfigError
+from radar_io.textfiles import read_toml
+
+ArrayLike = Any
+
+
+def radar_xyh(sr_m: ArrayLike, el_deg: ArrayLike, az_deg: ArrayLike) -> tuple[Any, Any, Any]:
+    """Radar rectangular X (north), Y (east), H (up) from SR/EL/AZ, eqs. (2-3)…(2-5)."""
+    el = np.deg2rad(el_deg)
+    az = np.deg2rad(az_deg)
+    r = sr_m * np.cos(el)
+    return r * np.cos(az), r * np.sin(az), sr_m * np.sin(el)
+
+
+def radar_sea(x_m: ArrayLike, y_m: ArrayLike, h_m: ArrayLike) -> tuple[Any, Any, Any]:
+    """Inverse of :func:`radar_xyh`: SR, EL (deg), AZ (deg, folded to [0, 360))."""
+    ground = np.hypot(x_m, y_m)
+    sr = np.sqrt(np.square(x_m) + np.square(y_m) + np.square(h_m))
+    el = np.rad2deg(np.arctan2(h_m, ground))
+    az = np.mod(np.rad2deg(np.arctan2(y_m, x_m)), 360.0)
+    az = np.where(az >= 360.0, az - 360.0, az)  # np.mod(-1e-14, 360) rounds to 360.0
+    return sr, el, az
+
+
+@dataclass(frozen=True)
+class Site:
+    """A radar site: WGS-84 antenna position and the runway frame around it."""
+
+    name: str = "unspecified"
+    lat_deg: float = 0.0
+    lon_deg: float = 0.0
+    h_m: float = 0.0
+    runway_heading_deg: float = 0.0
+    radar_xr_m: float = 0.0
+    radar_yr_m: float = 0.0
+    radar_hr_m: float = 0.0
+    description: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name, "description": self.description,
+            "radar": {"lat_deg": self.lat_deg, "lon_deg": self.lon_deg, "h_m": self.h_m},
+            "runway": {"heading_deg": self.runway_heading_deg, "radar_xr_m": self.radar_xr_m,
+                       "radar_yr_m": self.radar_yr_m, "radar_hr_m": self.radar_hr_m},
+        }
+
+
+def load_site(path: str | os.PathLike[str]) -> Site:
+    """Read a site TOML file (see ``firmware_specs/sites/demo.toml``)."""
+    p = Path(path)
+    doc = read_toml(p, "site file")
+
+    def num(section: str, key: str, lo: float, hi: float) -> float:
+        tab = doc.get(section)
+        if not isinstance(tab, dict) or key not in tab:
+            raise ConfigError(f"site file {p}: missing [{section}] {key}")
+        v = tab[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ConfigError(f"site file {p}: [{section}] {key} must be a number, got {v!r}")
+        if not lo <= v <= hi:
+            raise ConfigError(f"site file {p}: [{section}] {key} = {v} outside {lo} .. {hi}")
+        return float(v)
+
+    return Site(
+        name=str(doc.get("name", p.stem)),
+        description=str(doc.get("description", "")),
+        lat_deg=num("radar", "lat_deg", -90, 90),
+        lon_deg=num("radar", "lon_deg", -180, 180),
+        h_m=num("radar", "h_m", -1000, 10000),
+        runway_heading_deg=num("runway", "heading_deg", -360, 360),
+        radar_xr_m=num("runway", "radar_xr_m", -1e6, 1e6),
+        radar_yr_m=num("runway", "radar_yr_m", -1e6, 1e6),
+        radar_hr_m=num("runway", "radar_hr_m", -1e4, 1e4),
+    )
+
+
+def runway_xyh(sr_m: ArrayLike, el_deg: ArrayLike, az_deg: ArrayLike, site: Site
+               ) -> tuple[Any, Any, Any]:
+    """Runway frame X_r (along the approach heading), Y_r (right), H_r (up), eqs. (2-9)…(2-11)."""
+    el = np.deg2rad(el_deg)
+    rel = np.deg2rad(np.asarray(az_deg) - site.runway_heading_deg)
+    r = sr_m * np.cos(el)
+    return (r * np.cos(rel) + site.radar_xr_m,
+            r * np.sin(rel) + site.radar_yr_m,
+            sr_m * np.sin(el) + site.radar_hr_m)
+
+
+def runway_to_radar(xr_m: ArrayLike, yr_m: ArrayLike, hr_m: ArrayLike, site: Site
+                    ) -> tuple[Any, Any, Any]:
+    """Radar rectangular X, Y, H of runway-frame points: the inverse of :func:`runway_xyh`."""
+    p = np.deg2rad(site.runway_heading_deg)
+    a = np.asarray(xr_m) - site.radar_xr_m
+    b = np.asarray(yr_m) - site.radar_yr_m
+    return a * np.cos(p) - b * np.sin(p), a * np.sin(p) + b * np.cos(p), \
+        np.asarray(hr_m) - site.radar_hr_m
+
+
+def geodetic(sr_m: ArrayLike, el_deg: ArrayLike, az_deg: ArrayLike, site: Site
+             ) -> tuple[Any, Any, Any]:
+    """WGS-84 latitude (deg), longitude (deg), ellipsoidal height (m) of a radar measurement.
+
+    (AZ, EL, SR) are azimuth/elevation/slant range in the local north/east/up
+    frame at the antenna, converted with pymap3d's AER→geodetic.
+    """
+    return pymap3d.aer2geodetic(az_deg, el_deg, sr_m, site.lat_deg, site.lon_deg, site.h_m,
+                                deg=True)

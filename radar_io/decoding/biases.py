@@ -1,0 +1,107 @@
+"""Radar calibration sets: the biases ΔSR/ΔEL/ΔAZ the decoder adds (radar-interface.md §4 step 3).
+
+A calibration set is a small versioned JSON document::
+
+    {
+      "format": "radar_io-calibration/1",
+      "id": "2026-11-21-flight-7",
+      "created_utc": "2026-11-21T19:40:00Z",
+      "biases": {"dsr_m": 3.1, "del_deg": -0.012, "daz_deg": 0.034},
+      "statistics": {...},      # optional: what the bias estimate reported
+      "provenance": {...}       # optional: inputs, their hashes, who/what made it
+    }
+
+``SR^ = SR' + dsr_m``, ``EL^ = EL' + del_deg``, ``AZ^ = AZ' + daz_deg`` (metres and degrees).
+The all-zero set (id ``"none"``) is the default.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from radar_io.errors import ConfigError
+from radar_io.textfiles import read_json
+
+FORMAT = "radar_io-calibration/1"
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Radar biases added after servo-lag compensation (m, deg, deg)."""
+
+    dsr_m: float = 0.0
+    del_deg: float = 0.0
+    daz_deg: float = 0.0
+    id: str = "none"
+    created_utc: str = ""
+    statistics: dict[str, Any] = field(default_factory=dict, compare=False)
+    provenance: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        for name in ("dsr_m", "del_deg", "daz_deg"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+                raise ConfigError(f"calibration bias {name} must be a finite number, got {v!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document of this set (see module docstring)."""
+        return {
+            "format": FORMAT,
+            "id": self.id,
+            "created_utc": self.created_utc,
+            "biases": {"dsr_m": self.dsr_m, "del_deg": self.del_deg, "daz_deg": self.daz_deg},
+            "statistics": self.statistics,
+            "provenance": self.provenance,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, *, source: str = "calibration") -> "Calibration":
+        """Validate and build a set from its JSON document; raises ConfigError naming the problem."""
+        if not isinstance(doc, dict):
+            raise ConfigError(f"{source}: a calibration set must be a JSON object")
+        fmt = doc.get("format", FORMAT)
+        if fmt != FORMAT:
+            raise ConfigError(f"{source}: unsupported calibration format {fmt!r} (expected {FORMAT!r})")
+        biases = doc.get("biases")
+        if not isinstance(biases, dict):
+            raise ConfigError(f"{source}: missing object 'biases' with dsr_m, del_deg, daz_deg")
+        unknown = set(biases) - {"dsr_m", "del_deg", "daz_deg"}
+        if unknown:
+            raise ConfigError(f"{source}: unknown bias key(s) {sorted(unknown)}")
+        try:
+            return cls(
+                dsr_m=biases.get("dsr_m", 0.0),
+                del_deg=biases.get("del_deg", 0.0),
+                daz_deg=biases.get("daz_deg", 0.0),
+                id=str(doc.get("id", "unnamed")),
+                created_utc=str(doc.get("created_utc", "")),
+                statistics=dict(doc.get("statistics") or {}),
+                provenance=dict(doc.get("provenance") or {}),
+            )
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
+
+
+def load_calibration(path: str | os.PathLike[str]) -> Calibration:
+    """Read a calibration set JSON file."""
+    doc = read_json(path, "calibration file")
+    return Calibration.from_dict(doc, source=str(path))
+
+
+def save_calibration(cal: Calibration, path: str | os.PathLike[str]) -> None:
+    """Write a calibration set atomically (temporary file + rename)."""
+    p = Path(path)
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(json.dumps(cal.to_dict(), indent=2) + "\n", encoding="utf-8")
+    os.replace(tmp, p)
+
+
+def utc_now_iso() -> str:
+    """Current UTC time as ISO-8601 with a Z suffix (seconds resolution)."""
+    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")

@@ -1,0 +1,323 @@
+"""``.rdrlog`` recordings: the raw received bytes, append-only and crash-safe.
+
+File layout (all integers big-endian)::
+
+    file header   magic   8 bytes  b"RDRLOG\\x00\\x01"   (format version 1)
+                  hlen    u32      length of the JSON header
+                  header  hlen     UTF-8 JSON: format, spec_version, spec_sha256,
+                                   site, source, created_utc, software, clock
+                  hcrc    u32      zlib.crc32 of the JSON header
+    chunk …       magic   4 bytes  b"CHK1"
+                  t_ns    u64      receive time, ns since the Unix epoch (UTC)
+                  length  u32      payload length (at most 16 MiB)
+                  crc     u32      zlib.crc32 of t_ns|length|payload (12 + length bytes)
+                  payload length   the bytes exactly as received
+
+Each chunk is handed to the kernel in one ``write`` on an ``O_APPEND`` file, so
+a ``kill -9`` of the writer loses nothing it had written; ``fsync`` runs every
+``fsync_interval_s`` on a background thread, for power loss. A reader returns every complete chunk; a
+torn tail (a chunk cut short by a crash) is reported and skipped, and a damaged
+chunk in the middle is counted and skipped by hunting for the next valid chunk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import threading
+import time
+import zlib
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from radar_io import __version__
+from radar_io.errors import RecordingError
+from radar_io.coordinates.transforms import Site
+from radar_io.wirespec.frame import FrameSpec
+from radar_io.textfiles import open_input
+
+FILE_MAGIC = b"RDRLOG\x00\x01"
+CHUNK_MAGIC = b"CHK1"
+_CHUNK_HEAD = struct.Struct(">4sQII")  # magic, t_ns, length, crc
+MAX_CHUNK = 16 << 20
+FORMAT = "rdrlog/1"
+
+
+def is_recording(path: str | os.PathLike[str]) -> bool:
+    """True if the file starts with the ``.rdrlog`` magic."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(FILE_MAGIC)) == FILE_MAGIC
+    except OSError:
+        return False
+
+
+def _chunk_crc(t_ns: int, payload: bytes | memoryview) -> int:
+    return zlib.crc32(payload, zlib.crc32(struct.pack(">QI", t_ns, len(payload))))
+
+
+def encode_chunk(payload: bytes, t_ns: int) -> bytes:
+    """The bytes of one chunk (header + payload)."""
+    return _CHUNK_HEAD.pack(CHUNK_MAGIC, t_ns, len(payload), _chunk_crc(t_ns, payload)) + payload
+
+
+class RecordingWriter:
+    """Append raw received chunks to a new ``.rdrlog`` file."""
+
+    def __init__(self, path: str | os.PathLike[str], spec: FrameSpec, *, site: Site | None = None,
+                 source: str = "", fsync_interval_s: float = 1.0,
+                 extra: dict[str, Any] | None = None) -> None:
+        self.path = Path(path)
+        self.fsync_interval_s = fsync_interval_s
+        self.header: dict[str, Any] = {
+            "format": FORMAT,
+            "spec": spec.name,
+            "spec_version": spec.spec_version,
+            "spec_sha256": spec.sha256,
+            "site": site.to_dict() if site is not None else None,
+            "source": source,
+            "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "software": f"radar_io {__version__}",
+            "clock": "t_ns: receive time, ns since the Unix epoch (CLOCK_REALTIME)",
+            **(extra or {}),
+        }
+        try:
+            self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
+        except FileExistsError:
+            raise RecordingError(f"recording already exists, not overwriting: {self.path}") from None
+        except OSError as exc:
+            raise RecordingError(f"cannot create recording {self.path}: {exc.strerror}") from None
+        hdr = json.dumps(self.header, sort_keys=True).encode()
+        self._write(FILE_MAGIC + struct.pack(">I", len(hdr)) + hdr + struct.pack(">I", zlib.crc32(hdr)))
+        os.fsync(self._fd)
+        self.chunks = 0
+        self.bytes = 0
+        # fsync on a thread of its own: a slow disk never holds up the writer (the reader)
+        self._closing = threading.Event()
+        self._syncer = threading.Thread(target=self._sync_loop, name="rdrlog-fsync", daemon=True)
+        self._syncer.start()
+
+    def _sync_loop(self) -> None:
+        while not self._closing.wait(self.fsync_interval_s):
+            try:
+                os.fsync(self._fd)
+            except OSError:
+                pass  # closed meanwhile, or the disk is failing: write() reports it
+
+    def _write(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            n = os.write(self._fd, view)
+            view = view[n:]
+
+    def write(self, payload: bytes, t_ns: int | None = None) -> None:
+        """Append one chunk of received bytes with its receive time (default: now)."""
+        if self._fd < 0:
+            raise RecordingError(f"recording {self.path} is closed")
+        if len(payload) > MAX_CHUNK:
+            for k in range(0, len(payload), MAX_CHUNK):
+                self.write(payload[k:k + MAX_CHUNK], t_ns)
+            return
+        t = time.time_ns() if t_ns is None else t_ns
+        try:
+            self._write(encode_chunk(bytes(payload), t))
+        except OSError as exc:
+            raise RecordingError(f"cannot write recording {self.path}: {exc.strerror}") from None
+        self.chunks += 1
+        self.bytes += len(payload)
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            self._closing.set()
+            self._syncer.join()
+            try:
+                os.fsync(self._fd)
+            finally:
+                os.close(self._fd)
+                self._fd = -1
+
+    @property
+    def closed(self) -> bool:
+        return self._fd < 0
+
+    def __enter__(self) -> "RecordingWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass
+class Chunk:
+    """One recorded chunk: receive time (ns since the epoch), payload, file offset."""
+
+    t_ns: int
+    data: bytes
+    offset: int
+
+
+@dataclass
+class ReadReport:
+    """What a reader met besides good chunks."""
+
+    chunks: int = 0
+    bytes: int = 0
+    corrupt_chunks: int = 0
+    skipped_bytes: int = 0
+    torn_tail_bytes: int = 0
+    problems: list[str] = field(default_factory=list)
+
+
+class RecordingReader:
+    """Iterate the chunks of a ``.rdrlog`` in constant memory; never fails on a damaged body."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self._f: BinaryIO = open_input(self.path, "recording", RecordingError)
+        self.size = os.fstat(self._f.fileno()).st_size
+        self.header = self._read_header()
+        self.data_offset = self._f.tell()
+        self.report = ReadReport()
+
+    def _read_header(self) -> dict[str, Any]:
+        f = self._f
+        if f.read(len(FILE_MAGIC)) != FILE_MAGIC:
+            raise RecordingError(f"{self.path} is not an .rdrlog recording (bad magic)")
+        raw = f.read(4)
+        if len(raw) < 4:
+            raise RecordingError(f"{self.path}: header truncated")
+        (hlen,) = struct.unpack(">I", raw)
+        if hlen > 1 << 20:
+            raise RecordingError(f"{self.path}: header length {hlen} is implausible")
+        hdr, crc = f.read(hlen), f.read(4)
+        if len(hdr) < hlen or len(crc) < 4 or zlib.crc32(hdr) != struct.unpack(">I", crc)[0]:
+            raise RecordingError(f"{self.path}: header damaged or truncated")
+        try:
+            doc = json.loads(hdr)
+        except json.JSONDecodeError:
+            raise RecordingError(f"{self.path}: header is not valid JSON") from None
+        if doc.get("format") != FORMAT:
+            raise RecordingError(f"{self.path}: unsupported recording format {doc.get('format')!r}")
+        return doc
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> "RecordingReader":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __iter__(self) -> Iterator[Chunk]:
+        """Good chunks in file order, from the start; see :attr:`report` afterwards."""
+        self.report = rep = ReadReport()
+        f = self._f
+        f.seek(self.data_offset)
+        off = self.data_offset
+        hsize = _CHUNK_HEAD.size
+        while True:
+            head = f.read(hsize)
+            if not head:
+                return
+            if len(head) == hsize:
+                magic, t_ns, length, crc = _CHUNK_HEAD.unpack(head)
+                if magic == CHUNK_MAGIC and length <= MAX_CHUNK:
+                    payload = f.read(length)
+                    if len(payload) == length and _chunk_crc(t_ns, payload) == crc:
+                        rep.chunks += 1
+                        rep.bytes += length
+                        yield Chunk(t_ns, payload, off)
+                        off += hsize + length
+                        continue
+            elif off + len(head) >= self.size:
+                self._torn(off, rep)
+                return
+            # damaged chunk: hunt for the next chunk that validates
+            nxt = self._resync(off + 1)
+            if nxt is None:
+                self._torn(off, rep)
+                return
+            rep.corrupt_chunks += 1
+            rep.skipped_bytes += nxt - off
+            rep.problems.append(f"damaged data at byte {off}: skipped {nxt - off} bytes")
+            off = nxt
+            f.seek(off)
+
+    def _torn(self, off: int, rep: ReadReport) -> None:
+        rep.torn_tail_bytes = self.size - off
+        rep.problems.append(f"torn tail: last {self.size - off} bytes (an incomplete chunk) skipped")
+
+    def _resync(self, start: int) -> int | None:
+        """Offset of the next chunk at or after ``start`` whose CRC checks, or None."""
+        f = self._f
+        pos = start
+        window = 1 << 20
+        while pos < self.size:
+            f.seek(pos)
+            buf = f.read(window + 3)
+            i = buf.find(CHUNK_MAGIC)
+            while i >= 0:
+                if self._valid_at(pos + i):
+                    return pos + i
+                i = buf.find(CHUNK_MAGIC, i + 1)
+            pos += window
+        return None
+
+    def _valid_at(self, off: int) -> bool:
+        f = self._f
+        f.seek(off)
+        head = f.read(_CHUNK_HEAD.size)
+        if len(head) < _CHUNK_HEAD.size:
+            return False
+        magic, t_ns, length, crc = _CHUNK_HEAD.unpack(head)
+        if magic != CHUNK_MAGIC or length > MAX_CHUNK:
+            return False
+        payload = f.read(length)
+        return len(payload) == length and _chunk_crc(t_ns, payload) == crc
+
+
+def iter_payloads(path: str | os.PathLike[str], chunk_bytes: int = 1 << 22,
+                  progress: Callable[[int, int], None] | None = None,
+                  report: ReadReport | None = None) -> Iterator[bytes]:
+    """The received bytes of any input, in pieces of about ``chunk_bytes``, for decoding.
+
+    A ``.rdrlog`` yields its payloads (small chunks coalesced); anything else is
+    a raw capture read as is. ``progress(bytes_done, bytes_total)`` is called
+    after each piece; a recording's read problems are added to ``report``.
+    """
+    if is_recording(path):
+        with RecordingReader(path) as r:
+            pending: list[bytes] = []
+            size = 0
+            for c in r:
+                pending.append(c.data)
+                size += len(c.data)
+                if size >= chunk_bytes:
+                    yield b"".join(pending)
+                    pending, size = [], 0
+                    if progress:
+                        progress(c.offset, r.size)
+            if pending:
+                yield b"".join(pending)
+            if progress:
+                progress(r.size, r.size)
+            if report is not None:
+                for k in ("chunks", "bytes", "corrupt_chunks", "skipped_bytes", "torn_tail_bytes"):
+                    setattr(report, k, getattr(report, k) + getattr(r.report, k))
+                report.problems.extend(r.report.problems)
+        return
+    with open_input(path, "input", RecordingError) as f:
+        total = os.fstat(f.fileno()).st_size
+        done = 0
+        while True:
+            b = f.read(chunk_bytes)
+            if not b:
+                return
+            done += len(b)
+            yield b
+            if progress:
+                progress(done, total)

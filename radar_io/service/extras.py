@@ -1,0 +1,189 @@
+"""Live extras around the acquisition pipeline (radar-interface.md §6–§9).
+
+* :class:`DeviationProcessor` adds ``dy_m, dz_m, along_m, leg`` from a reference path;
+* :class:`SinkWorker` feeds a TLM1 or D/A sink on its own thread through a bounded
+  queue, so a slow serial line can never stall acquisition (overflow is counted);
+* :class:`AirDataReader` reads the aircraft's air data from a CAN bus (python-can +
+  the DBC) and keeps the recent samples in SI units, with the radar ground range and
+  height seen when each arrived (for the profile overlay).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import deque
+from typing import Any
+
+import numpy as np
+
+from radar_io.coordinates.reference_path import DEVIATION_COLUMNS, ReferencePath
+
+log = logging.getLogger("radar_io.outputs")
+
+KT = 1852.0 / 3600.0   # m/s per knot
+FT = 0.3048            # m per foot
+NM = 1852.0            # m per nautical mile
+
+
+def _columns(msgs: list[dict[str, Any]], names: list[str] | tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Message dicts → float columns (None → NaN) for the names present in the messages."""
+    first = msgs[0]
+    return {c: np.array([np.nan if m[c] is None else m[c] for m in msgs], dtype=np.float64)
+            for c in names if c in first}
+
+
+class DeviationProcessor:
+    """Adds the path deviation to each message (None / leg -1 when there is no position)."""
+
+    def __init__(self, path: ReferencePath) -> None:
+        self.path = path
+
+    def __call__(self, msgs: list[dict[str, Any]]) -> None:
+        cols = _columns(msgs, self.path.columns)
+        if len(cols) < 3:
+            for m in msgs:
+                m.update(dy_m=None, dz_m=None, along_m=None, leg=-1)
+            return
+        dev = self.path.deviation(*(cols[c] for c in self.path.columns))
+        for i, m in enumerate(msgs):
+            for c in DEVIATION_COLUMNS:
+                v = dev[c][i]
+                m[c] = int(v) if c == "leg" else (None if v != v else float(v))
+
+
+class SinkWorker:
+    """Runs a TLM1 / D/A sink on its own thread; ``submit`` never blocks."""
+
+    def __init__(self, name: str, sink: Any, max_chunks: int = 2000) -> None:
+        self.name, self.sink = name, sink
+        self.q: queue.Queue[dict[str, np.ndarray] | None] = queue.Queue(max_chunks)
+        self.dropped_samples = 0
+        self.errors = 0
+        self.last_error: str | None = None
+        self._thread = threading.Thread(target=self._run, name=f"sink-{name}", daemon=True)
+        self._thread.start()
+
+    def submit(self, msgs: list[dict[str, Any]]) -> None:
+        """Snapshot the messages' columns (on the caller's thread) and queue them."""
+        cols = _columns(msgs, [k for k, v in msgs[0].items() if not isinstance(v, str)])
+        try:
+            self.q.put_nowait(cols)
+        except queue.Full:
+            self.dropped_samples += len(msgs)
+
+    def _run(self) -> None:
+        while True:
+            cols = self.q.get()
+            if cols is None:
+                return
+            try:
+                self.sink.send(cols)
+            except Exception as exc:  # noqa: BLE001 - a sink failure must not kill the worker
+                self.errors += 1
+                self.last_error = str(exc)
+                if self.errors in (1, 10, 100) or self.errors % 1000 == 0:
+                    log.warning("%s sink: %s", self.name, exc)
+
+    def stats(self) -> dict[str, Any]:
+        enc = self.sink.encoder
+        return {"records": getattr(enc, "frames", getattr(enc, "samples", 0)),
+                "saturation": dict(enc.saturation), "dropped_samples": self.dropped_samples,
+                "errors": self.errors, "last_error": self.last_error, "queued": self.q.qsize()}
+
+    def close(self) -> None:
+        self.q.put(None)
+        self._thread.join(5)
+        self.sink.close()
+
+
+class AirDataReader:
+    """The aircraft's 8 Hz air data from a CAN bus, kept for the API in SI units."""
+
+    def __init__(self, interface: str, channel: str, latest_radar: Any,
+                 bitrate: int | None = None, keep: int = 8 * 600) -> None:
+        from radar_io.sources.canbus import open_bus
+        from radar_io.decoding.airdata import AirDataDecoder, load_dbc
+
+        self.url = f"{interface}:{channel}"
+        self.bus = open_bus(interface, channel, bitrate)
+        self.decoder = AirDataDecoder(load_dbc())
+        self.latest_radar = latest_radar  # () -> the newest radar message or None
+        self.samples: deque[dict[str, Any]] = deque(maxlen=keep)
+        self.shutter_events = 0
+        self._seq = 0
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="can-airdata", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        pending: dict[str, float] | None = None
+        while not self._stop.is_set():
+            try:
+                m = self.bus.recv(0.2)
+            except Exception as exc:  # noqa: BLE001 - keep reading; report once per error
+                log.warning("CAN %s: %s", self.url, exc)
+                self._stop.wait(1.0)
+                continue
+            if m is None:
+                continue
+            got = self.decoder.feed(m)
+            if got is None:
+                continue
+            kind, row = got
+            if kind == "event":
+                self.shutter_events += 1
+            elif kind == "sample_start":
+                if pending is not None:
+                    self._publish(pending)
+                pending = row
+            if pending is not None and all(k in pending for k in ("ias_kt", "pressure_altitude_ft",
+                                                                   "pitch_deg", "dme2_nm")):
+                self._publish(pending)
+                pending = None
+
+    def _publish(self, row: dict[str, float]) -> None:
+        radar = self.latest_radar()
+        g = h = None
+        if radar is not None and radar.get("x_m") is not None:
+            g = float(np.hypot(radar["x_m"], radar["y_m"]))
+            h = radar["h_m"]
+
+        def si(key: str, k: float) -> float | None:
+            v = row.get(key)
+            return None if v is None or v != v else v * k
+
+        with self._lock:
+            self._seq += 1
+            self.samples.append({
+                "air_seq": self._seq, "t_ns": time.time_ns(),
+                "aircraft_time_s": row.get("time_s"), "ias_mps": si("ias_kt", KT),
+                "pressure_altitude_m": si("pressure_altitude_ft", FT),
+                "pitch_deg": row.get("pitch_deg"), "roll_deg": row.get("roll_deg"),
+                "heading_deg": row.get("heading_deg"), "dme1_m": si("dme1_nm", NM),
+                "dme2_m": si("dme2_nm", NM), "shutter_count": row.get("shutter_count"),
+                "radar_ground_range_m": g, "radar_h_m": h,
+            })
+
+    def since(self, after: int, limit: int) -> list[dict[str, Any]]:
+        with self._lock:
+            return [s for s in self.samples if s["air_seq"] > after][:limit]
+
+    def stats(self) -> dict[str, Any]:
+        d = self.decoder
+        return {"source": self.url, "samples_received": self._seq,
+                "shutter_events": self.shutter_events,
+                "messages": d.messages, "unknown": d.unknown, "undecodable": d.undecodable,
+                "last_sample_age_s": (time.time_ns() - self.samples[-1]["t_ns"]) / 1e9
+                if self.samples else None}
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+        try:
+            self.bus.shutdown()
+        except Exception:  # noqa: BLE001
+            pass

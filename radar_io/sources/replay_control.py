@@ -1,0 +1,136 @@
+"""Replay of a recording as a byte source, with pause, resume, seek, step and speed."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from radar_io.errors import SourceError
+from radar_io.recording.rdrlog import RecordingReader
+
+
+class ReplayController:
+    """A ``.rdrlog`` as a :class:`~radar_io.sources.serial_sim_replay.ByteSource`, paced by its receive timestamps.
+
+    ``speed`` multiplies the recorded pace (``0`` = as fast as possible). Step
+    delivers the next recorded chunk (one read of the original port) while paused.
+    """
+
+    def __init__(self, path: Path, speed: float = 1.0) -> None:
+        if speed < 0:
+            raise SourceError("replay speed must be >= 0")
+        self.path = Path(path)
+        self.url = f"replay://{self.path.name}?speed={speed:g}"
+        with RecordingReader(self.path) as r:
+            self.header = r.header
+            self._index = [(c.offset, c.t_ns, len(c.data)) for c in r]
+            self.report = r.report
+        self._lock = threading.Lock()
+        self.speed = speed
+        self.paused = False
+        self._steps = 0
+        self._i = 0
+        self._anchor: tuple[float, int] | None = None  # (monotonic, t_ns) pacing reference
+        self._f: Any = None
+
+    @property
+    def duration_s(self) -> float:
+        if not self._index:
+            return 0.0
+        return (self._index[-1][1] - self._index[0][1]) / 1e9
+
+    @property
+    def finished(self) -> bool:
+        return self._i >= len(self._index)
+
+    def state(self) -> dict[str, Any]:
+        with self._lock:
+            pos = (self._index[min(self._i, len(self._index) - 1)][1] - self._index[0][1]) / 1e9 \
+                if self._index else 0.0
+            return {"recording": self.path.stem, "speed": self.speed, "paused": self.paused,
+                    "position_s": pos, "duration_s": self.duration_s, "finished": self.finished,
+                    "chunk": self._i, "chunks": len(self._index)}
+
+    def open(self) -> None:
+        try:
+            self._f = open(self.path, "rb")
+        except OSError as exc:
+            raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from None
+        self._anchor = None
+
+    def close(self) -> None:
+        if self._f is not None:
+            self._f.close()
+            self._f = None
+
+    def pause(self) -> None:
+        with self._lock:
+            self.paused = True
+
+    def resume(self) -> None:
+        with self._lock:
+            self.paused = False
+            self._anchor = None
+
+    def step(self, n: int = 1) -> None:
+        with self._lock:
+            self.paused = True
+            self._steps += max(1, n)
+
+    def set_speed(self, speed: float) -> None:
+        if speed < 0:
+            raise SourceError("replay speed must be >= 0")
+        with self._lock:
+            self.speed = speed
+            self._anchor = None
+
+    def seek(self, position_s: float) -> None:
+        """Jump to the first chunk received at or after ``position_s`` from the start."""
+        with self._lock:
+            if not self._index:
+                return
+            t = self._index[0][1] + int(max(0.0, position_s) * 1e9)
+            lo, hi = 0, len(self._index)
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if self._index[mid][1] < t:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            self._i = lo
+            self._anchor = None
+
+    def read(self, timeout_s: float) -> bytes:
+        if self._f is None:
+            raise SourceError(f"{self.url} is not open")
+        with self._lock:
+            if self.finished or (self.paused and not self._steps):
+                wait = timeout_s
+                entry = None
+            else:
+                entry = self._index[self._i]
+                stepping = self.paused
+                wait = 0.0
+                if not stepping and self.speed > 0:
+                    if self._anchor is None:
+                        self._anchor = (time.monotonic(), entry[1])
+                    due = self._anchor[0] + (entry[1] - self._anchor[1]) / 1e9 / self.speed
+                    wait = due - time.monotonic()
+                if wait <= 0:
+                    self._i += 1
+                    if stepping:
+                        self._steps -= 1
+        if entry is None or wait > 0:
+            time.sleep(min(max(wait, 0.0), timeout_s))
+            return b""
+        off, _, length = entry
+        try:
+            self._f.seek(off + 20)  # chunk header: magic, t_ns, length, crc
+            data = self._f.read(length)
+        except OSError as exc:
+            raise SourceError(f"reading recording {self.path.name}: {exc.strerror}") from None
+        if len(data) != length:
+            raise SourceError(f"recording {self.path.name} changed under the replay")
+        return data
