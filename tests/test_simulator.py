@@ -6,7 +6,7 @@ import numpy as np
 
 from radar_io.decoding.decoders import decode_bytes
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
-from radar_io.sources.serial_sim_replay import SimSource
+from radar_io.sources.sim import SimSource
 
 
 def test_compensated_track_recovers_the_truth():

@@ -125,10 +125,10 @@ def _guidance_outputs(args: argparse.Namespace) -> tuple[Any, Any, Any]:
 
         path = load_path(args.path)
     if args.tlm_out or args.da_out:
-        from radar_io.sinks.uplink import DASink, TelemetrySink
+        from radar_io.sinks import open_sink
 
-        tlm = TelemetrySink(args.tlm_out) if args.tlm_out else None
-        da = DASink(args.da_out) if args.da_out else None
+        tlm = open_sink("tlm1", args.tlm_out) if args.tlm_out else None
+        da = open_sink("da", args.da_out) if args.da_out else None
     return path, tlm, da
 
 
@@ -141,7 +141,7 @@ def _progress(progress: Any, done: int, total: int, state: dict[str, Any]) -> No
 def cmd_simulate(args: argparse.Namespace) -> int:
     from radar_io.recording.rdrlog import RecordingWriter
     from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
-    from radar_io.sources.serial_sim_replay import is_serial_target, open_port
+    from radar_io.sources.serialport import is_serial_target, open_port
 
     script = FlightScript(**{k: getattr(args, k) for k in FlightScript.__dataclass_fields__
                              if getattr(args, k) is not None})
@@ -202,7 +202,7 @@ def cmd_monitor(args: argparse.Namespace) -> int:
     from radar_io.decoding.decoders import FrameDecoder
     from radar_io.errors import SourceError
     from radar_io.framing.framers import Framer
-    from radar_io.sources.serial_sim_replay import open_source
+    from radar_io.sources import open_source
 
     common = _load_common(args)
     src = open_source(args.source)

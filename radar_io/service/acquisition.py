@@ -23,7 +23,7 @@ from radar_io.decoding.decoders import FrameDecoder
 from radar_io.errors import RadarIOError, RecordingError
 from radar_io.framing.framers import Framer
 from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
-from radar_io.sources.serial_sim_replay import ByteSource, open_source
+from radar_io.sources import ByteSource, open_source
 from radar_io.wirespec.frame import FrameSpec
 from radar_io.service.history import History
 from radar_io.recording.recorder import Recorder, SyncEvent

@@ -26,7 +26,7 @@ from radar_io.service.config import TOKEN_ENV, ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
 from radar_io.recording.recorder import Recorder
-from radar_io.sources.replay_control import ReplayController
+from radar_io.sources.replay import ReplaySource
 
 WEB_DIR = Path(__file__).resolve().parent.parent / "web"
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
@@ -92,14 +92,15 @@ class Service:
                                  auto=cfg.auto_record, preroll_s=cfg.preroll_s)
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
-        self.replay: ReplayController | None = None
+        self.replay: ReplaySource | None = None
         self._setup_outputs(cfg)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
         """Reference path, TLM1 / D/A sinks and CAN air data, as configured."""
         from radar_io.coordinates.reference_path import load_path
-        from radar_io.service.extras import AirDataReader, DeviationProcessor, SinkWorker
+        from radar_io.service.extras import AirDataReader, DeviationProcessor
+        from radar_io.sinks.worker import SinkWorker
 
         self.path = load_path(cfg.path) if cfg.path else None
         if self.path is not None:
@@ -320,7 +321,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         if req.recording == svc.recorder.current:
             raise HTTPException(409, "that recording is still being written")
         try:
-            ctl = ReplayController(path, req.speed)
+            ctl = ReplaySource(path, req.speed)
         except RadarIOError as exc:
             raise HTTPException(422, str(exc)) from None
         svc.recorder.stop()
@@ -328,7 +329,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         svc.acq.switch_source(ctl, "replay")
         return ctl.state()
 
-    def _replay() -> ReplayController:
+    def _replay() -> ReplaySource:
         if svc.replay is None or svc.acq.mode != "replay":
             raise HTTPException(409, "no replay running")
         return svc.replay
@@ -371,7 +372,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
     def replay_stop() -> dict[str, Any]:
         """Back to the live source."""
         _replay()
-        from radar_io.sources.serial_sim_replay import open_source
+        from radar_io.sources import open_source
 
         svc.acq.switch_source(open_source(svc.cfg.source), "live")
         return {"mode": "live", "source": svc.cfg.source}

@@ -1,8 +1,6 @@
 """Live extras around the acquisition pipeline (radar-interface.md §6–§9).
 
 * :class:`DeviationProcessor` adds ``dy_m, dz_m, along_m, leg`` from a reference path;
-* :class:`SinkWorker` feeds a TLM1 or D/A sink on its own thread through a bounded
-  queue, so a slow serial line can never stall acquisition (overflow is counted);
 * :class:`AirDataReader` reads the aircraft's air data from a CAN bus (python-can +
   the DBC) and keeps the recent samples in SI units, with the radar ground range and
   height seen when each arrived (for the profile overlay).
@@ -20,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from radar_io.coordinates.reference_path import DEVIATION_COLUMNS, ReferencePath
+from radar_io.sinks.worker import message_columns
 
 log = logging.getLogger("radar_io.outputs")
 
@@ -28,11 +27,6 @@ FT = 0.3048            # m per foot
 NM = 1852.0            # m per nautical mile
 
 
-def _columns(msgs: list[dict[str, Any]], names: list[str] | tuple[str, ...]) -> dict[str, np.ndarray]:
-    """Message dicts → float columns (None → NaN) for the names present in the messages."""
-    first = msgs[0]
-    return {c: np.array([np.nan if m[c] is None else m[c] for m in msgs], dtype=np.float64)
-            for c in names if c in first}
 
 
 class DeviationProcessor:
@@ -42,7 +36,7 @@ class DeviationProcessor:
         self.path = path
 
     def __call__(self, msgs: list[dict[str, Any]]) -> None:
-        cols = _columns(msgs, self.path.columns)
+        cols = message_columns(msgs, self.path.columns)
         if len(cols) < 3:
             for m in msgs:
                 m.update(dy_m=None, dz_m=None, along_m=None, leg=-1)
@@ -52,51 +46,6 @@ class DeviationProcessor:
             for c in DEVIATION_COLUMNS:
                 v = dev[c][i]
                 m[c] = int(v) if c == "leg" else (None if v != v else float(v))
-
-
-class SinkWorker:
-    """Runs a TLM1 / D/A sink on its own thread; ``submit`` never blocks."""
-
-    def __init__(self, name: str, sink: Any, max_chunks: int = 2000) -> None:
-        self.name, self.sink = name, sink
-        self.q: queue.Queue[dict[str, np.ndarray] | None] = queue.Queue(max_chunks)
-        self.dropped_samples = 0
-        self.errors = 0
-        self.last_error: str | None = None
-        self._thread = threading.Thread(target=self._run, name=f"sink-{name}", daemon=True)
-        self._thread.start()
-
-    def submit(self, msgs: list[dict[str, Any]]) -> None:
-        """Snapshot the messages' columns (on the caller's thread) and queue them."""
-        cols = _columns(msgs, [k for k, v in msgs[0].items() if not isinstance(v, str)])
-        try:
-            self.q.put_nowait(cols)
-        except queue.Full:
-            self.dropped_samples += len(msgs)
-
-    def _run(self) -> None:
-        while True:
-            cols = self.q.get()
-            if cols is None:
-                return
-            try:
-                self.sink.send(cols)
-            except Exception as exc:  # noqa: BLE001 - a sink failure must not kill the worker
-                self.errors += 1
-                self.last_error = str(exc)
-                if self.errors in (1, 10, 100) or self.errors % 1000 == 0:
-                    log.warning("%s sink: %s", self.name, exc)
-
-    def stats(self) -> dict[str, Any]:
-        enc = self.sink.encoder
-        return {"records": getattr(enc, "frames", getattr(enc, "samples", 0)),
-                "saturation": dict(enc.saturation), "dropped_samples": self.dropped_samples,
-                "errors": self.errors, "last_error": self.last_error, "queued": self.q.qsize()}
-
-    def close(self) -> None:
-        self.q.put(None)
-        self._thread.join(5)
-        self.sink.close()
 
 
 class AirDataReader:

@@ -1,0 +1,49 @@
+"""Byte sources, chosen by URL scheme (like pyserial's ``serial_for_url`` and python-can's
+``BACKENDS``).
+
+:data:`SOURCES` maps a scheme to ``"module:factory"``; the module is imported only when
+a URL with that scheme is opened. A URL whose scheme is not in the registry (a device
+path such as ``/dev/ttyUSB0?baudrate=115200`` or a pyserial URL such as ``loop://``,
+``socket://host:port``, ``rfc2217://…``) goes to :data:`DEFAULT_SOURCE`, the serial port.
+
+A new source is one module implementing :class:`~radar_io.sources.base.ByteSource` and
+one line here.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from radar_io.errors import SourceError
+from radar_io.sources.base import ByteSource
+
+#: scheme → "module:callable(url) -> ByteSource"
+SOURCES: dict[str, str] = {
+    "sim": "radar_io.sources.sim:SimSource",
+    "replay": "radar_io.sources.replay:replay_from_url",
+}
+#: everything else: serial devices and pyserial URLs
+DEFAULT_SOURCE = "radar_io.sources.serialport:SerialSource"
+
+
+def _load(target: str) -> Any:
+    module, _, name = target.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def scheme_of(url: str) -> str:
+    """The part before ``:`` when it looks like a URL scheme, else ``""``."""
+    head, sep, _ = url.partition(":")
+    return head.lower() if sep and head.isidentifier() else ""
+
+
+def open_source(url: str) -> ByteSource:
+    """The source for ``url`` (not yet opened). Raises SourceError for an empty URL."""
+    if not url:
+        raise SourceError("empty source URL")
+    factory = _load(SOURCES.get(scheme_of(url), DEFAULT_SOURCE))
+    return factory(url)
+
+
+__all__ = ["ByteSource", "DEFAULT_SOURCE", "SOURCES", "open_source", "scheme_of"]

@@ -19,7 +19,7 @@ from radar_io.analysis.clock_alignment import align_files, compare_altitude, fit
 from radar_io.decoding.airdata import read_can_log
 from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
-from radar_io.sources.serial_sim_replay import SerialSource
+from radar_io.sources.serialport import SerialSource
 from radar_io.wirespec.frame import load_spec
 
 TOD0 = 43210.0

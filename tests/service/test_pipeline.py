@@ -10,7 +10,7 @@ from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
 from radar_io.service.acquisition import Acquisition
 from radar_io.service.history import History
 from radar_io.recording.recorder import Recorder
-from radar_io.sources.replay_control import ReplayController
+from radar_io.sources.replay import ReplaySource
 
 from .test_live_pty import wait_for
 
@@ -91,7 +91,7 @@ def test_reader_survives_a_vanished_replay_and_goes_back_live(tmp_path, spec):
     p = tmp_path / "r.rdrlog"
     with RecordingWriter(p, spec) as w:
         w.write(b"".join(frames([GO] * 10)), 1)
-    ctl = ReplayController(p, 0)
+    ctl = ReplaySource(p, 0)
     p.unlink()  # gone before the reader opens it
     acq, rec, published = pipeline(tmp_path, spec, source="sim://?rate_hz=200")
     acq.start()
@@ -99,7 +99,7 @@ def test_reader_survives_a_vanished_replay_and_goes_back_live(tmp_path, spec):
         acq.switch_source(ctl, "replay")
         wait_for(lambda: acq.mode == "replay" and acq.last_error, what="replay failure reported")
         assert acq._thread.is_alive()
-        from radar_io.sources.serial_sim_replay import open_source
+        from radar_io.sources import open_source
 
         acq.switch_source(open_source("sim://?rate_hz=200"), "live")
         n = len(published)

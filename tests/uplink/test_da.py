@@ -13,6 +13,7 @@ from radar_io.errors import SpecError
 from radar_io.coordinates.reference_path import ReferencePath, add_deviation
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 from radar_io.encoding.da import DAEncoder, decode_da_words, load_da_spec
+from radar_io.sinks import open_sink
 from radar_io.sinks.uplink import DASink
 from radar_io.errors import UplinkError
 
@@ -123,9 +124,9 @@ def test_library_decoder_and_sinks(tmp_path):
     with DASink(str(f)) as sink:
         sink.send(cols)
     assert f.read_bytes() == data
-    sink = DASink("loop://")
-    sink.send(cols)
-    assert sink.sink.handle.read(len(data)) == data
+    sink = open_sink("da", "loop://")
+    sink.write(cols)
+    assert sink.link.handle.read(len(data)) == data
     sink.close()
 
 

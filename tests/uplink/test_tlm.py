@@ -18,6 +18,7 @@ from radar_io.coordinates.reference_path import ReferencePath, add_deviation
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 from radar_io.encoding.kinematics import Kinematics
 from radar_io.encoding.tlm1 import TelemetryDecoder, TelemetryEncoder, load_tlm_spec
+from radar_io.sinks import open_sink
 from radar_io.sinks.uplink import TelemetrySink
 from radar_io.errors import UplinkError
 
@@ -210,9 +211,9 @@ def test_sinks_udp_serial_and_file(tmp_path):
     finally:
         rx.close()
     assert all(len(g) == 26 for g in grams) and b"".join(grams) == expected
-    sink = TelemetrySink("loop://")
-    sink.send(cols)
-    got = sink.sink.handle.read(len(expected))
+    sink = open_sink("tlm1", "loop://")
+    sink.write(cols)
+    got = sink.link.handle.read(len(expected))
     sink.close()
     assert got == expected
     f = tmp_path / "t.tlm"
@@ -222,7 +223,7 @@ def test_sinks_udp_serial_and_file(tmp_path):
     with pytest.raises(UplinkError, match="udp://HOST:PORT"):
         TelemetrySink("udp://nohost")
     with pytest.raises(UplinkError, match="cannot write"):
-        TelemetrySink(str(tmp_path / "missing" / "x.tlm"))
+        open_sink("tlm1", str(tmp_path / "missing" / "x.tlm"))
 
 
 def test_on_a_decoded_simulated_flight(tmp_path):

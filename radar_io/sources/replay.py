@@ -1,18 +1,25 @@
-"""Replay of a recording as a byte source, with pause, resume, seek, step and speed."""
+"""``replay://PATH.rdrlog?speed=1.0``: a recording played back as a byte source.
+
+Paced by the recorded receive timestamps (``speed`` multiplies the pace, ``0`` = as
+fast as possible), with pause, resume, seek, step and speed for the service's replay
+controls. The same class serves ``radar-io serve --source replay://…`` and the
+dashboard's replay panel."""
 
 from __future__ import annotations
 
 import threading
+import urllib.parse
 import time
 from pathlib import Path
 from typing import Any
 
 from radar_io.errors import SourceError
+from radar_io.sources.base import parse_query
 from radar_io.recording.rdrlog import RecordingReader
 
 
-class ReplayController:
-    """A ``.rdrlog`` as a :class:`~radar_io.sources.serial_sim_replay.ByteSource`, paced by its receive timestamps.
+class ReplaySource:
+    """A ``.rdrlog`` as a :class:`~radar_io.sources.base.ByteSource`, paced by its receive timestamps.
 
     ``speed`` multiplies the recorded pace (``0`` = as fast as possible). Step
     delivers the next recorded chunk (one read of the original port) while paused.
@@ -57,7 +64,7 @@ class ReplayController:
         try:
             self._f = open(self.path, "rb")
         except OSError as exc:
-            raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from None
+            raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from exc
         self._anchor = None
 
     def close(self) -> None:
@@ -130,7 +137,20 @@ class ReplayController:
             self._f.seek(off + 20)  # chunk header: magic, t_ns, length, crc
             data = self._f.read(length)
         except OSError as exc:
-            raise SourceError(f"reading recording {self.path.name}: {exc.strerror}") from None
+            raise SourceError(f"reading recording {self.path.name}: {exc.strerror}") from exc
         if len(data) != length:
             raise SourceError(f"recording {self.path.name} changed under the replay")
         return data
+
+
+def replay_from_url(url: str) -> ReplaySource:
+    """``replay://PATH?speed=S`` → a :class:`ReplaySource` (not yet opened)."""
+    parts, q = parse_query(url)
+    path = urllib.parse.unquote(parts.netloc + parts.path)
+    if not path:
+        raise SourceError(f"{url}: no recording path")
+    try:
+        speed = float(q.get("speed", "1.0"))
+    except ValueError as exc:
+        raise SourceError(f"{url}: speed must be a number") from exc
+    return ReplaySource(Path(path), speed)
