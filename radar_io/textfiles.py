@@ -18,12 +18,12 @@ def open_input(path: str | os.PathLike[str], what: str,
     p = Path(path)
     try:
         return open(p, "rb")
-    except FileNotFoundError:
-        raise error(f"{what} not found: {p}") from None
-    except IsADirectoryError:
-        raise error(f"{what} {p} is a directory, not a file") from None
+    except FileNotFoundError as exc:
+        raise error(f"{what} not found: {p}") from exc
+    except IsADirectoryError as exc:
+        raise error(f"{what} {p} is a directory, not a file") from exc
     except OSError as exc:
-        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from None
+        raise error(f"cannot read {what} {p}: {exc.strerror or exc}") from exc
 
 
 def read_text(path: str | os.PathLike[str], what: str,
@@ -33,7 +33,7 @@ def read_text(path: str | os.PathLike[str], what: str,
         try:
             return Path(path), f.read()
         except OSError as exc:
-            raise error(f"cannot read {what} {path}: {exc.strerror or exc}") from None
+            raise error(f"cannot read {what} {path}: {exc.strerror or exc}") from exc
 
 
 def read_toml(path: str | os.PathLike[str], what: str,
@@ -47,7 +47,7 @@ def parse_toml(p: Path, raw: bytes, what: str,
     try:
         return tomllib.loads(raw.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise error(f"{what} {p} is not valid TOML: {exc}") from None
+        raise error(f"{what} {p} is not valid TOML: {exc}") from exc
 
 
 def read_json(path: str | os.PathLike[str], what: str,
@@ -57,6 +57,6 @@ def read_json(path: str | os.PathLike[str], what: str,
     try:
         return json.loads(raw.decode("utf-8"))
     except UnicodeDecodeError as exc:
-        raise error(f"{what} {p} is not UTF-8 text: {exc}") from None
+        raise error(f"{what} {p} is not UTF-8 text: {exc}") from exc
     except json.JSONDecodeError as exc:
-        raise error(f"{what} {p} is not valid JSON: {exc.msg} (line {exc.lineno})") from None
+        raise error(f"{what} {p} is not valid JSON: {exc.msg} (line {exc.lineno})") from exc

@@ -58,8 +58,8 @@ class GridTransfer:
         basis = np.stack([np.ones(uv.shape[:2]), uv[..., 0], uv[..., 1], uv[..., 0] * uv[..., 1]], axis=2)
         try:
             self._coef = np.linalg.solve(basis, self._gq)  # (cells, 4 coefficients, 2 axes)
-        except np.linalg.LinAlgError:
-            raise CalibrationError("digitised reference grid has a degenerate cell") from None
+        except np.linalg.LinAlgError as exc:
+            raise CalibrationError("digitised reference grid has a degenerate cell") from exc
         # orientation (shoelace sign) of each grid quad, so "inside" works whatever the grid handedness
         q, qn = self._gq, np.roll(self._gq, -1, axis=1)
         self._orient = np.sign(np.sum(q[..., 0] * qn[..., 1] - qn[..., 0] * q[..., 1], axis=1))

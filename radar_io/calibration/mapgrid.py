@@ -53,7 +53,7 @@ def _transformers(crs_text: str):
     try:
         crs = pyproj.CRS.from_user_input(crs_text)
     except pyproj.exceptions.CRSError as exc:
-        raise CalibrationError(f"unknown coordinate reference system {crs_text!r}: {exc}") from None
+        raise CalibrationError(f"unknown coordinate reference system {crs_text!r}: {exc}") from exc
     if not crs.is_projected:
         raise CalibrationError(f"{crs_text!r} ({crs.name}) is not a projected (map grid) CRS")
     geog = crs.geodetic_crs

@@ -66,7 +66,7 @@ def monte_carlo(
         try:
             r = resect(points_m, film, focal_mm, start=solution.pose, weights=weights, max_iterations=max_iterations)
         except CalibrationError as exc:
-            raise CalibrationError(f"Monte Carlo run {m + 1} of {runs} failed: {exc}") from None
+            raise CalibrationError(f"Monte Carlo run {m + 1} of {runs} failed: {exc}") from exc
         samples[m] = [getattr(r.pose, k) for k in PARAM_KEYS]
     # angles: differences to the solution wrapped to (−180, 180] before taking the spread
     samples[:, 3:] = ref[3:] + (180.0 - np.mod(180.0 - (samples[:, 3:] - ref[3:]), 360.0))

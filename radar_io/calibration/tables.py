@@ -65,14 +65,14 @@ def read_table(path: str | os.PathLike[str], *, min_rows: int = 1) -> Table:
     p = Path(path)
     try:
         data = p.read_bytes()
-    except FileNotFoundError:
-        raise CalibrationInputError(f"input file not found: {p}") from None
+    except FileNotFoundError as exc:
+        raise CalibrationInputError(f"input file not found: {p}") from exc
     except OSError as exc:
-        raise CalibrationInputError(f"cannot read {p}: {exc.strerror or exc}") from None
+        raise CalibrationInputError(f"cannot read {p}: {exc.strerror or exc}") from exc
     try:
         text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise CalibrationInputError(f"{p}: not a UTF-8 text file") from None
+    except UnicodeDecodeError as exc:
+        raise CalibrationInputError(f"{p}: not a UTF-8 text file") from exc
     reader = csv.reader(text.splitlines())
     columns: tuple[str, ...] | None = None
     rows: list[tuple[str, ...]] = []
@@ -95,7 +95,7 @@ def read_table(path: str | os.PathLike[str], *, min_rows: int = 1) -> Table:
             rows.append(tuple(fields))
             lines.append(reader.line_num)
     except csv.Error as exc:
-        raise CalibrationInputError(f"{p}, line {reader.line_num}: {exc}") from None
+        raise CalibrationInputError(f"{p}, line {reader.line_num}: {exc}") from exc
     if columns is None:
         raise CalibrationInputError(f"{p}: empty file (expected a header row)")
     if len(rows) < min_rows:

@@ -1,6 +1,6 @@
 """``radar-io can-log`` and ``radar-io align``: the airborne recorder on the command line.
 
-A plug-in of ``radar_io.cli.main`` (``add_subparser``).
+One of the commands of ``radar_io.cli.main`` (``add_subparser``).
 """
 
 from __future__ import annotations

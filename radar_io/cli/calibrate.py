@@ -152,7 +152,7 @@ def _cmd_bias(args: argparse.Namespace) -> int:
         try:
             save_calibration(cal, args.output)
         except OSError as exc:
-            raise CalibrationInputError(f"cannot write calibration set {args.output}: {exc.strerror or exc}") from None
+            raise CalibrationInputError(f"cannot write calibration set {args.output}: {exc.strerror or exc}") from exc
     return _emit(stats)
 
 

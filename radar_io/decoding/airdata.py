@@ -48,15 +48,15 @@ def load_dbc(path: str | os.PathLike[str] | None = None) -> Any:
     p = Path(path) if path is not None else spec_dir() / "airdata.dbc"
     try:
         db = cantools.database.load_file(str(p), database_format="dbc")
-    except FileNotFoundError:
-        raise AirborneError(f"DBC file not found: {p}") from None
+    except FileNotFoundError as exc:
+        raise AirborneError(f"DBC file not found: {p}") from exc
     except Exception as exc:  # noqa: BLE001 - cantools raises many parse error types
-        raise AirborneError(f"cannot load DBC file {p}: {exc}") from None
+        raise AirborneError(f"cannot load DBC file {p}: {exc}") from exc
     for name, signals in REQUIRED.items():
         try:
             msg = db.get_message_by_name(name)
-        except KeyError:
-            raise AirborneError(f"{p}: no message {name}") from None
+        except KeyError as exc:
+            raise AirborneError(f"{p}: no message {name}") from exc
         missing = [s for s in signals if s not in {x.name for x in msg.signals}]
         if missing:
             raise AirborneError(f"{p}: message {name} lacks signal(s) {', '.join(missing)}")
@@ -163,4 +163,4 @@ def read_can_log(path: str | os.PathLike[str], db: Any = None) -> AircraftLog:
     except AirborneError:
         raise
     except Exception as exc:  # noqa: BLE001 - python-can readers raise many types on bad files
-        raise AirborneError(f"cannot read CAN log {p}: {exc}") from None
+        raise AirborneError(f"cannot read CAN log {p}: {exc}") from exc

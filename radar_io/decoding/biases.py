@@ -85,7 +85,7 @@ class Calibration:
                 provenance=dict(doc.get("provenance") or {}),
             )
         except ConfigError as exc:
-            raise ConfigError(f"{source}: {exc}") from None
+            raise ConfigError(f"{source}: {exc}") from exc
 
 
 def load_calibration(path: str | os.PathLike[str]) -> Calibration:

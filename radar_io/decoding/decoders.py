@@ -168,8 +168,8 @@ class MeasurementBatch:
     def __getitem__(self, name: str) -> np.ndarray:
         try:
             return self._cols[name]
-        except KeyError:
-            raise KeyError(f"no column {name!r}; columns are {', '.join(self.columns)}") from None
+        except KeyError as exc:
+            raise KeyError(f"no column {name!r}; columns are {', '.join(self.columns)}") from exc
 
     def __contains__(self, name: object) -> bool:
         return name in self._cols

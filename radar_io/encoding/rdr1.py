@@ -33,9 +33,9 @@ class FrameEncoder:
             body = self._struct.build({"sync": self.spec.sync_word, "crc": 0,
                                        **{n: int(raw[n]) for n in self._names}})
         except KeyError as exc:
-            raise EncodeError(f"missing raw word {exc.args[0]!r}") from None
+            raise EncodeError(f"missing raw word {exc.args[0]!r}") from exc
         except Exception as exc:  # construct's FormatFieldError etc.: value out of range
-            raise EncodeError(f"cannot encode frame: {exc}") from None
+            raise EncodeError(f"cannot encode frame: {exc}") from exc
         at = self.spec.crc.offset
         return body[:at] + self._crc(body[:at]).to_bytes(2, "big") + body[at + 2:]
 

@@ -86,10 +86,10 @@ class RecordingWriter:
         }
         try:
             self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o644)
-        except FileExistsError:
-            raise RecordingError(f"recording already exists, not overwriting: {self.path}") from None
+        except FileExistsError as exc:
+            raise RecordingError(f"recording already exists, not overwriting: {self.path}") from exc
         except OSError as exc:
-            raise RecordingError(f"cannot create recording {self.path}: {exc.strerror}") from None
+            raise RecordingError(f"cannot create recording {self.path}: {exc.strerror}") from exc
         hdr = json.dumps(self.header, sort_keys=True).encode()
         self._write(FILE_MAGIC + struct.pack(">I", len(hdr)) + hdr + struct.pack(">I", zlib.crc32(hdr)))
         os.fsync(self._fd)
@@ -125,7 +125,7 @@ class RecordingWriter:
         try:
             self._write(encode_chunk(bytes(payload), t))
         except OSError as exc:
-            raise RecordingError(f"cannot write recording {self.path}: {exc.strerror}") from None
+            raise RecordingError(f"cannot write recording {self.path}: {exc.strerror}") from exc
         self.chunks += 1
         self.bytes += len(payload)
 
@@ -197,8 +197,8 @@ class RecordingReader:
             raise RecordingError(f"{self.path}: header damaged or truncated")
         try:
             doc = json.loads(hdr)
-        except json.JSONDecodeError:
-            raise RecordingError(f"{self.path}: header is not valid JSON") from None
+        except json.JSONDecodeError as exc:
+            raise RecordingError(f"{self.path}: header is not valid JSON") from exc
         if doc.get("format") != FORMAT:
             raise RecordingError(f"{self.path}: unsupported recording format {doc.get('format')!r}")
         return doc

@@ -20,10 +20,11 @@ import numpy as np
 
 from radar_io.decoding.biases import Calibration
 from radar_io.decoding.decoders import FrameDecoder
-from radar_io.errors import RadarIOError, RecordingError
+from radar_io.errors import RecordingError
 from radar_io.framing.framers import Framer
 from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
 from radar_io.sources import ByteSource, open_source
+from radar_io.sources.reconnect import ReconnectingSource
 from radar_io.wirespec.frame import FrameSpec
 from radar_io.service.history import History
 from radar_io.recording.recorder import Recorder, SyncEvent
@@ -39,10 +40,6 @@ def encode_message(m: dict[str, Any]) -> str:
     return json.dumps(m, separators=(",", ":"), allow_nan=False)
 
 
-def _why(exc: Exception) -> str:
-    return str(exc) if isinstance(exc, RadarIOError) else f"{type(exc).__name__}: {exc}"
-
-
 class Acquisition:
     """Reader thread: source → recorder → framer → decoder → coordinates → history → publish."""
 
@@ -56,20 +53,17 @@ class Acquisition:
         self.backoff_s = backoff_s
         self.processors: list[Processor] = []
         self.live_url = source_url
-        self._source: ByteSource = open_source(source_url)
         self._pending: tuple[ByteSource, str] | None = None  # (source, mode) to switch to
         self.decoder = FrameDecoder(spec, calibration)
         self.framer = Framer(spec)
-        self.connected = False
-        self.reconnects = 0
         self.processing_errors = 0
-        self.last_error: str | None = None
         self.go = 0
         self.rx_good = 0
         self._last_sync = 0
         self._last_frame_mono: float | None = None
         self._rate: deque[tuple[float, int]] = deque()
         self._stop = threading.Event()
+        self._link = ReconnectingSource(open_source(source_url), backoff_s, self._stop)
         self._thread = threading.Thread(target=self._run, name="radar-reader", daemon=True)
         self.mode = "live"
 
@@ -94,14 +88,14 @@ class Acquisition:
 
     @property
     def source(self) -> ByteSource:
-        return self._source
+        return self._link.source
 
     def status(self) -> dict[str, Any]:
         st = self.framer.stats
         now = time.monotonic()
         age = None if self._last_frame_mono is None else now - self._last_frame_mono
         return {
-            "source": self._source.url, "mode": self.mode, "connected": self.connected,
+            "source": self._link.url, "mode": self.mode, "connected": self.connected,
             "frames": st.frames, "crc_errors": st.crc_errors, "implausible": st.implausible,
             "bytes_discarded": st.bytes_discarded, "seq_gaps": st.seq_gaps,
             "rate_hz": self.rate_hz(now), "go": self.go, "rx_good": self.rx_good,
@@ -120,59 +114,36 @@ class Acquisition:
 
     # -- the reader thread -----------------------------------------------------------------
     def _run(self) -> None:
-        """Open, read, process; any failure of the source is a disconnect with back-off
-        (0.1 s doubling to 5 s, reset only once data flows again). Never exits on error."""
-        delay = self.backoff_s[0]
+        """Read and process; any failure of the source is a disconnect with back-off
+        (:class:`~radar_io.sources.reconnect.ReconnectingSource`). Never exits on error."""
+        link = self._link
         while not self._stop.is_set():
             if self._pending is not None:
                 self._swap_source()
-            if not self.connected:
-                try:
-                    self._source.open()
-                except Exception as exc:  # noqa: BLE001 - SourceError, OSError, driver bugs
-                    self._disconnected(_why(exc))
-                    self._stop.wait(delay)
-                    delay = min(delay * 2, self.backoff_s[1])
-                    continue
-                self.connected = True
-                log.info("source %s open", self._source.url)
-            try:
-                data = self._source.read(self.read_timeout_s)
-            except Exception as exc:  # noqa: BLE001
-                self._close_source()
-                self.reconnects += 1
-                self._disconnected(_why(exc))
-                self._stop.wait(delay)  # a port that opens but cannot be read must not spin
-                delay = min(delay * 2, self.backoff_s[1])
-                continue
+            data = link.read(self.read_timeout_s)
             if data:
-                delay = self.backoff_s[0]
-                self.last_error = None
                 try:
                     self._process(data, time.time_ns())
                 except Exception:  # noqa: BLE001 - a bug downstream must not stop acquisition
                     self.processing_errors += 1
                     log.exception("processing a chunk failed")
-        self._close_source()
-        self.connected = False
+        link.close()
 
-    def _close_source(self) -> None:
-        try:
-            self._source.close()
-        except Exception:  # noqa: BLE001 - closing a dead source must never stop the reader
-            log.exception("closing %s failed", self._source.url)
+    @property
+    def connected(self) -> bool:
+        return self._link.connected
 
-    def _disconnected(self, why: str) -> None:
-        if self.connected or self.last_error != why:
-            log.warning("source %s: %s", self._source.url, why)
-        self.connected = False
-        self.last_error = why
+    @property
+    def reconnects(self) -> int:
+        return self._link.reconnects
+
+    @property
+    def last_error(self) -> str | None:
+        return self._link.last_error
 
     def _swap_source(self) -> None:
         (new, mode), self._pending = self._pending, None  # type: ignore[misc]
-        self._close_source()
-        self.connected = False
-        self._source = new
+        self._link.replace(new)
         self.mode = mode
         self.framer = Framer(self.spec)
         self.go = self._last_sync = 0  # a new stream: its first GO / SYNC high is an edge

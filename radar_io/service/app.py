@@ -323,7 +323,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         try:
             ctl = ReplaySource(path, req.speed)
         except RadarIOError as exc:
-            raise HTTPException(422, str(exc)) from None
+            raise HTTPException(422, str(exc)) from exc
         svc.recorder.stop()
         svc.replay = ctl
         svc.acq.switch_source(ctl, "replay")
@@ -389,7 +389,7 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         try:
             cal = Calibration.from_dict(doc, source="request")
         except ConfigError as exc:
-            raise HTTPException(422, str(exc)) from None
+            raise HTTPException(422, str(exc)) from exc
         if not cal.created_utc:
             cal = Calibration(**{**cal.__dict__, "created_utc": utc_now_iso()})
         if not _ID.match(cal.id):

@@ -57,7 +57,7 @@ class ServiceConfig:
             try:
                 tok = Path(self.token_file).read_text(encoding="utf-8").strip()
             except OSError as exc:
-                raise ConfigError(f"cannot read token file {self.token_file}: {exc.strerror}") from None
+                raise ConfigError(f"cannot read token file {self.token_file}: {exc.strerror}") from exc
             if not tok:
                 raise ConfigError(f"token file {self.token_file} is empty")
             return tok

@@ -18,7 +18,7 @@ def open_bus(interface: str, channel: str, bitrate: int | None = None, **kwargs:
     try:
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except Exception as exc:  # noqa: BLE001 - python-can raises many types for a bad interface
-        raise AirborneError(f"cannot open CAN interface {interface!r} channel {channel!r}: {exc}") from None
+        raise AirborneError(f"cannot open CAN interface {interface!r} channel {channel!r}: {exc}") from exc
 
 
 class CanRecorder:
@@ -31,7 +31,7 @@ class CanRecorder:
         try:
             self.writer = can.Logger(self.path)
         except Exception as exc:  # noqa: BLE001 - unknown suffix, unwritable path, ...
-            raise AirborneError(f"cannot write CAN log {self.path}: {exc}") from None
+            raise AirborneError(f"cannot write CAN log {self.path}: {exc}") from exc
         self.messages = 0
 
     def drain(self, timeout_s: float = 0.0) -> int:
@@ -46,7 +46,7 @@ class CanRecorder:
                 n += 1
                 msg = self.bus.recv(timeout=0.0)
         except can.CanError as exc:
-            raise AirborneError(f"CAN receive failed: {exc}") from None
+            raise AirborneError(f"CAN receive failed: {exc}") from exc
         finally:
             self.messages += n
         return n

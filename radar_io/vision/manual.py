@@ -39,8 +39,8 @@ LINE_KEYS = ("horizon", "left_edge", "right_edge")
 def _as_points(name: str, value: Any) -> NDArray[np.float64]:
     try:
         pts = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise VisionError(f"{name}: points must be a list of [x, y] pairs") from None
+    except (TypeError, ValueError) as exc:
+        raise VisionError(f"{name}: points must be a list of [x, y] pairs") from exc
     if pts.ndim != 2 or pts.shape[1] != 2:
         raise VisionError(f"{name}: points must be a list of [x, y] pairs")
     if len(pts) < 2:

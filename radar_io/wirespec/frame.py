@@ -72,10 +72,10 @@ def eval_number(expr: Any, *, what: str) -> float:
 
     try:
         return float(ev(ast.parse(expr, mode="eval")))
-    except SyntaxError:
-        raise SpecError(f"{what}: cannot parse {expr!r}") from None
+    except SyntaxError as exc:
+        raise SpecError(f"{what}: cannot parse {expr!r}") from exc
     except (ZeroDivisionError, OverflowError) as exc:
-        raise SpecError(f"{what}: {expr!r}: {exc}") from None
+        raise SpecError(f"{what}: {expr!r}: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -237,8 +237,8 @@ def load_spec(path: str | os.PathLike[str] | None = None) -> FrameSpec:
 def _mtime(p: Path) -> int:
     try:
         return p.stat().st_mtime_ns
-    except OSError:
-        raise SpecError(f"spec file not found: {p}") from None
+    except OSError as exc:
+        raise SpecError(f"spec file not found: {p}") from exc
 
 
 @lru_cache(maxsize=16)

@@ -116,7 +116,7 @@ async def runway(request: Request, focal_px: float = Query(gt=0, description="fo
             raise HTTPException(422, "cannot decode the image (PNG, JPEG, BMP, TIFF … expected)")
         res = find_runway(img, focal_px, half_width_m, pp)
     except VisionError as exc:
-        raise HTTPException(422, str(exc)) from None
+        raise HTTPException(422, str(exc)) from exc
     out = {**res.to_dict(), "lines": _lines(res),
            "image": {"width": int(img.shape[1]), "height": int(img.shape[0])}}
     if overlay:
@@ -134,5 +134,5 @@ def runway_manual(req: PickedPoints) -> dict[str, Any]:
         res = pose_from_points(req.points, req.focal_px, req.half_width_m,
                                (req.principal_point[0], req.principal_point[1]))
     except VisionError as exc:
-        raise HTTPException(422, str(exc)) from None
+        raise HTTPException(422, str(exc)) from exc
     return {**res.to_dict(), "lines": _lines(res)}

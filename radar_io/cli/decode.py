@@ -1,0 +1,123 @@
+"""``radar-io decode``: a raw capture or a recording → one row per accepted frame."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from typing import Any
+
+from radar_io.cli.common import add_common, load_common
+from radar_io.errors import ConfigError
+
+def add_subparser(sub: Any) -> None:
+    p = sub.add_parser("decode", help="decode a raw capture or .rdrlog to CSV / JSON lines",
+                       description="Decode RDR1 frames from a raw capture (any bytes) or a "
+                       ".rdrlog recording; one row per accepted frame.")
+    p.add_argument("input", metavar="INPUT", help="raw capture or .rdrlog ('-' for stdin)")
+    p.add_argument("-o", "--output", metavar="OUT", help="output file (default stdout)")
+    p.add_argument("--format", choices=("csv", "jsonl"), help="default from OUT's extension, else csv")
+    p.add_argument("--stats", metavar="STATS.json", help="write the framer counters here")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--path", metavar="PATH", help="reference path TOML: adds dy_m,dz_m,along_m,leg")
+    p.add_argument("--tlm-out", metavar="FILE", help="one TLM1 uplink frame per valid sample "
+                   "(needs --path and --site for the default channels)")
+    p.add_argument("--da-out", metavar="FILE", help="the 8 D/A recorder words per sample "
+                   "(big-endian u16; needs --path)")
+    add_common(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from radar_io.decoding.decoders import iter_decode
+    from radar_io.coordinates.reference_path import add_deviation
+    from radar_io.cli.progress import Progress
+    from radar_io.sinks.table import MeasurementWriter
+    from radar_io.recording.rdrlog import ReadReport, iter_payloads
+
+    common = load_common(args)
+    path, tlm, da = _guidance_outputs(args)  # bad options fail before any output is created
+    fmt = args.format or ("jsonl" if args.output and args.output.endswith((".jsonl", ".json"))
+                          else "csv")
+    if args.input != "-" and not os.path.exists(args.input):
+        raise ConfigError(f"input not found: {args.input}")
+    progress = Progress("decode", enabled=not args.quiet)
+    report = ReadReport()
+    if args.input == "-":
+        stdin = sys.stdin.buffer
+        chunks = iter(lambda: stdin.read1(1 << 20), b"")
+    else:
+        chunks = iter_payloads(args.input, progress=lambda d, t: _progress(progress, d, t, state),
+                               report=report)
+    state: dict[str, Any] = {"frames": 0}
+    try:
+        out = (open(args.output, "w", encoding="utf-8", newline="") if args.output
+               else sys.stdout)
+    except OSError as exc:
+        raise ConfigError(f"cannot write {args.output}: {exc.strerror}") from exc
+    stats: dict[str, int] = {}
+    try:
+        writer = None
+        for batch in iter_decode(chunks, **common):
+            if path is not None:
+                batch = add_deviation(batch, path)
+            if writer is None:
+                writer = MeasurementWriter(out, batch.columns, fmt)
+            writer.write(batch)
+            if tlm is not None:
+                tlm.send(batch)
+            if da is not None:
+                da.send(batch)
+            state["frames"] = batch.stats["frames"]
+            stats = batch.stats
+        out.flush()
+    except BrokenPipeError:
+        sys.stderr.close()  # downstream closed (e.g. `| head`): stop quietly
+        return 0
+    finally:
+        if out is not sys.stdout:
+            out.close()
+        for sink in (tlm, da):
+            if sink is not None:
+                sink.close()
+    for name, sink in (("tlm-out", tlm), ("da-out", da)):
+        if sink is not None and not args.quiet:
+            enc = sink.encoder
+            sat = {k: v for k, v in enc.saturation.items() if v}
+            print(f"radar-io decode: {name}: {enc.frames if name == 'tlm-out' else enc.samples} "
+                  f"records, saturated {sat or 'none'}", file=sys.stderr)
+    for problem in report.problems:
+        print(f"radar-io decode: warning: {args.input}: {problem}", file=sys.stderr)
+    progress.close(", ".join(f"{k} {v}" for k, v in stats.items()))
+    if args.stats:
+        doc = {**stats, "recording": {
+            "corrupt_chunks": report.corrupt_chunks, "skipped_bytes": report.skipped_bytes,
+            "torn_tail_bytes": report.torn_tail_bytes}} if report.chunks else stats
+        try:
+            with open(args.stats, "w", encoding="utf-8") as f:
+                json.dump(doc, f, indent=2)
+                f.write("\n")
+        except OSError as exc:
+            raise ConfigError(f"cannot write {args.stats}: {exc.strerror}") from exc
+    return 0
+
+
+def _guidance_outputs(args: argparse.Namespace) -> tuple[Any, Any, Any]:
+    """The reference path and the TLM1 / D/A file sinks asked for on the command line."""
+    path = tlm = da = None
+    if args.path:
+        from radar_io.coordinates.reference_path import load_path
+
+        path = load_path(args.path)
+    if args.tlm_out or args.da_out:
+        from radar_io.sinks import open_sink
+
+        tlm = open_sink("tlm1", args.tlm_out) if args.tlm_out else None
+        da = open_sink("da", args.da_out) if args.da_out else None
+    return path, tlm, da
+
+
+def _progress(progress: Any, done: int, total: int, state: dict[str, Any]) -> None:
+    progress.total = total
+    progress.update(done, f"{state['frames']} frames")

@@ -1,0 +1,61 @@
+"""``radar-io serve``: the live service (REST, websocket, dashboard)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from radar_io.errors import ConfigError
+
+def add_subparser(sub: Any) -> None:
+    p = sub.add_parser("serve", help="the live service: REST, websocket and the dashboard",
+                       description="Acquire from a source, record, and serve the API and the "
+                       "operator dashboard. With no arguments: the built-in simulator on "
+                       "http://127.0.0.1:8000/.")
+    p.add_argument("--config", metavar="CONFIG.toml", help="service config (see deploy/)")
+    p.add_argument("--source", help="sim:// (default), a serial device or pyserial URL, "
+                   "replay://PATH.rdrlog?speed=1")
+    p.add_argument("--host", help="bind address (default 127.0.0.1)")
+    p.add_argument("--port", type=int, help="TCP port (default 8000)")
+    p.add_argument("--site", help="site TOML (sim:// defaults to the demo site)")
+    p.add_argument("--calibration", help="calibration set JSON to apply at start")
+    p.add_argument("--data-dir", help="recordings and calibration sets (default ./radar-data)")
+    p.add_argument("--auto-record", choices=("go", "manual", "always"),
+                   help="record per GO period (default), only on request, or always")
+    p.add_argument("--token-file", help="file holding the control token "
+                   "(or set RADAR_IO_TOKEN; no token = control disabled)")
+    p.add_argument("--path", help="reference path TOML: deviation needles, DY/DZ in messages")
+    p.add_argument("--tlm-out", help="TLM1 uplink: udp://host:port, a serial URL/device or a file")
+    p.add_argument("--da-out", help="D/A recorder words: a serial URL/device or a file")
+    p.add_argument("--can", metavar="INTERFACE:CHANNEL",
+                   help="aircraft air data over CAN, e.g. socketcan:can0 or virtual:air")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    import logging
+
+    import uvicorn
+
+    from radar_io.service.app import create_app
+    from radar_io.service.config import load_config
+
+    cfg = load_config(args.config, {
+        "source": args.source, "host": args.host, "port": args.port, "site": args.site,
+        "calibration": args.calibration, "data_dir": args.data_dir,
+        "auto_record": args.auto_record, "token_file": args.token_file, "path": args.path,
+        "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can})
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    app = create_app(cfg)
+    svc = app.state.service
+    print(f"radar-io serve: source {cfg.source}, dashboard http://{cfg.host}:{cfg.port}/ "
+          f"(API docs /docs), data in {svc.data_dir.resolve()}, control "
+          f"{'enabled' if svc.token else 'disabled (no token configured)'}", file=sys.stderr)
+    try:
+        # per-message deflate would compress every measurement once per client: off
+        uvicorn.run(app, host=cfg.host, port=int(cfg.port), log_level="warning",
+                    ws_ping_interval=20, ws_per_message_deflate=False)
+    except OSError as exc:  # e.g. address already in use
+        raise ConfigError(f"cannot serve on {cfg.host}:{cfg.port}: {exc.strerror}") from exc
+    return 0
