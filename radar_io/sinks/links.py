@@ -18,7 +18,32 @@ from typing import Any
 from radar_io.errors import SourceError, StorageError, UplinkError
 
 
-class UdpLink:
+class _Link:
+    """What every link shares: its target, record size, open handle and byte count."""
+
+    kind = ""
+
+    def __init__(self, target: str, record_bytes: int) -> None:
+        self.target, self.record_bytes = target, record_bytes
+        self.handle: Any = None
+        self.bytes = 0
+
+    def _handle(self) -> Any:
+        if self.handle is None:
+            raise UplinkError(f"{self.target} is not open")
+        return self.handle
+
+    def close(self) -> None:
+        """Release the handle; never raises (closing a dead port or socket)."""
+        if self.handle is not None:
+            try:
+                self.handle.close()
+            except Exception:  # noqa: BLE001 - closing a dead link must never raise
+                pass
+            self.handle = None
+
+
+class UdpLink(_Link):
     """One datagram per record of ``record_bytes`` (0: one datagram per write)."""
 
     kind = "udp"
@@ -31,10 +56,8 @@ class UdpLink:
             port = None
         if not parts.hostname or port is None:
             raise UplinkError(f"{target}: expected udp://HOST:PORT")
-        self.target, self.record_bytes = target, record_bytes
+        super().__init__(target, record_bytes)
         self.addr = (parts.hostname, port)
-        self.handle: Any = None
-        self.bytes = 0
 
     def open(self) -> None:
         try:
@@ -44,31 +67,20 @@ class UdpLink:
             raise UplinkError(f"cannot open {self.target}: {exc}") from exc
 
     def write(self, data: bytes) -> None:
-        if self.handle is None:
-            raise UplinkError(f"{self.target} is not open")
+        sock = self._handle()
         n = self.record_bytes or len(data)
         try:
             for k in range(0, len(data), n):
-                self.handle.sendto(data[k:k + n], self.addr)
+                sock.sendto(data[k:k + n], self.addr)
         except OSError as exc:
             raise UplinkError(f"{self.target}: write failed: {exc}") from exc
         self.bytes += len(data)
 
-    def close(self) -> None:
-        if self.handle is not None:
-            self.handle.close()
-            self.handle = None
 
-
-class SerialLink:
+class SerialLink(_Link):
     """A serial device or pyserial URL."""
 
     kind = "serial"
-
-    def __init__(self, target: str, record_bytes: int) -> None:
-        self.target, self.record_bytes = target, record_bytes
-        self.handle: Any = None
-        self.bytes = 0
 
     def open(self) -> None:
         from radar_io.sources.serialport import open_port
@@ -79,33 +91,19 @@ class SerialLink:
             raise UplinkError(str(exc)) from exc
 
     def write(self, data: bytes) -> None:
-        if self.handle is None:
-            raise UplinkError(f"{self.target} is not open")
+        port = self._handle()
         try:
             if data:
-                self.handle.write(data)
+                port.write(data)
         except Exception as exc:  # noqa: BLE001 - pyserial raises several types
             raise UplinkError(f"{self.target}: write failed: {exc}") from exc
         self.bytes += len(data)
 
-    def close(self) -> None:
-        if self.handle is not None:
-            try:
-                self.handle.close()
-            except Exception:  # noqa: BLE001 - closing a dead port must never raise
-                pass
-            self.handle = None
 
-
-class FileLink:
+class FileLink(_Link):
     """A file, created or truncated; every write reaches the kernel at once (unbuffered)."""
 
     kind = "file"
-
-    def __init__(self, target: str, record_bytes: int) -> None:
-        self.target, self.record_bytes = target, record_bytes
-        self.handle: Any = None
-        self.bytes = 0
 
     def open(self) -> None:
         try:
@@ -114,24 +112,15 @@ class FileLink:
             raise UplinkError(f"cannot write {self.target}: {exc.strerror}") from exc
 
     def write(self, data: bytes) -> None:
-        if self.handle is None:
-            raise UplinkError(f"{self.target} is not open")
+        f = self._handle()
         view = memoryview(data)
         try:
             while view:  # a raw file may take fewer bytes than offered
-                view = view[self.handle.write(view):]
+                view = view[f.write(view):]
         except OSError as exc:
             raise StorageError(f"{self.target}: write failed: {exc.strerror}",
                                errno=exc.errno) from exc
         self.bytes += len(data)
-
-    def close(self) -> None:
-        if self.handle is not None:
-            try:
-                self.handle.close()
-            except OSError:
-                pass
-            self.handle = None
 
 
 def make_link(target: str, record_bytes: int) -> UdpLink | SerialLink | FileLink:
