@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
                 da.send(batch)
             state["frames"] = batch.stats["frames"]
             stats = batch.stats
+        writer.final_metadata.update({k: str(v) for k, v in stats.items()})
         writer.close()  # the output appears under its name only now
     except BrokenPipeError:
         writer.abort()

@@ -45,6 +45,8 @@ class TableWriter(Sink):
         if self.target == "-" and self.needs_file:
             raise ConfigError(f"{self.format} output needs a file (-o OUT.{self.format})")
         self.metadata = dict(metadata or {})
+        #: metadata known only at the end (framer counters), stored by formats with a footer
+        self.final_metadata: dict[str, str] = {}
         self.rows = 0
         self._atomic: Any = None
         self._out: IO[bytes] | None = None

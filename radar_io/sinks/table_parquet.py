@@ -4,7 +4,9 @@ Batches are gathered until :attr:`ParquetTableWriter.ROW_GROUP_ROWS` rows (at mo
 1 M) and written as one row group, so memory holds one row group of columns. The
 schema carries the units (field metadata ``unit``) and the file metadata
 (``radar_io.spec_version``, ``radar_io.site``, ``radar_io.calibration_id``,
-``radar_io.source_file``, ``radar_io.source_sha256`` …).
+``radar_io.source_file``, ``radar_io.source_sha256`` …); the writer's ``final_metadata``
+(framer counters such as ``radar_io.crc_errors``) goes into the file footer's key-value
+metadata, read by ``pq.read_metadata(f).metadata`` or DuckDB's ``parquet_kv_metadata``.
 """
 
 from __future__ import annotations
@@ -59,4 +61,9 @@ class ParquetTableWriter(TableWriter):
             import pyarrow as pa
 
             self._writer.write_table(pa.Table.from_batches([], self._schema))
+        if self.final_metadata:  # file key-value metadata, in the footer
+            from radar_io.sinks.arrow_table import META_PREFIX
+
+            self._writer.add_key_value_metadata(
+                {f"{META_PREFIX}{k}": str(v) for k, v in self.final_metadata.items()})
         self._writer.close()
