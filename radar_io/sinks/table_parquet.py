@@ -30,8 +30,14 @@ class ParquetTableWriter(TableWriter):
         from radar_io.sinks.arrow_table import batch_to_arrow
 
         self._schema = batch_to_arrow(batch, self.metadata).schema
+        import pyarrow as pa
+
+        # dictionary encoding only where values repeat (flags, counters); measured floats
+        # are nearly all distinct, and a dictionary attempt costs time and buffered pages
+        small = [f.name for f in self._schema if not pa.types.is_floating(f.type)]
         self._writer: Any = pq.ParquetWriter(self._out, self._schema,
-                                             compression=self.COMPRESSION)
+                                             compression=self.COMPRESSION,
+                                             use_dictionary=small)
         self._pending: list[Any] = []
         self._pending_rows = 0
 
