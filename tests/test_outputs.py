@@ -304,3 +304,23 @@ def test_metadata_names_site_and_calibration(recording, tmp_path):
     assert t.schema.names[-6:] == ["xr_m", "yr_m", "hr_m", "lat_deg", "lon_deg", "hae_m"]
     assert t.schema.field("lat_deg").metadata[b"unit"] == b"deg"
     assert os.path.getsize(out) > 0
+
+
+@pytest.mark.parametrize("fmt", ["csv", "jsonl"])
+def test_stdout_reader_gone_stops_quietly(recording, fmt):
+    p = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "decode", str(recording),
+                          "--format", fmt, "-q"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, cwd=ROOT)
+    try:
+        assert p.stdout is not None and p.stderr is not None
+        first = p.stdout.readline()
+        p.stdout.close()  # like `| head -1`
+        err = p.stderr.read()
+        p.wait(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+        p.stderr.close()
+    assert first.startswith(b"seq,tod_s," if fmt == "csv" else b'{"seq":0,')
+    assert p.returncode == 0 and err == b""

@@ -14,6 +14,7 @@ The formats and the file extensions that select them are registered in
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from collections.abc import Mapping
@@ -78,6 +79,8 @@ class TableWriter(Sink):
             if n:
                 self._write(batch)
         except OSError as exc:
+            if _broken_pipe(exc):
+                raise BrokenPipeError(str(exc)) from exc  # reader gone (`| head`): caller stops
             raise StorageError(f"cannot write {self.target}: {exc.strerror or exc}") from exc
         self.rows += n
         return n
@@ -102,6 +105,8 @@ class TableWriter(Sink):
                 self._out.flush()
         except OSError as exc:
             self.abort()
+            if _broken_pipe(exc):
+                raise BrokenPipeError(str(exc)) from exc
             raise StorageError(f"cannot write {self.target}: {exc.strerror or exc}") from exc
         except BaseException:
             self.abort()
@@ -137,6 +142,12 @@ class TableWriter(Sink):
 
     def _finish(self) -> None:
         """Write the trailer (footer); the file is then complete."""
+
+
+def _broken_pipe(exc: OSError) -> bool:
+    """True for a write to a pipe whose reader has gone (pyarrow reports it without errno)."""
+    return isinstance(exc, BrokenPipeError) or exc.errno == errno.EPIPE \
+        or "Broken pipe" in str(exc)
 
 
 def _columns(batch: Batch) -> tuple[str, ...]:
