@@ -9,6 +9,7 @@ from fastapi import APIRouter, Depends
 
 from radar_io.errors import NotFoundError
 from radar_io.service.alarms import AlarmEngine, _clean
+from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
 from radar_io.service.state import ServiceState
 
@@ -22,14 +23,15 @@ def _engine(state: ServiceState) -> AlarmEngine:
     return engine
 
 
-@router.get("/api/alarms")
+@router.get("/api/alarms", responses=responses(404))
 def alarms(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Active alarms, oldest first: ``id, name, column, value, limit, since`` (s since the
     epoch), ``since_utc``, ``acknowledged``."""
     return {"alarms": [{k: _clean(v) for k, v in a.items()} for a in _engine(state).active()]}
 
 
-@router.post("/api/alarms/{alarm_id}/ack", dependencies=CONTROL, tags=["control"])
+@router.post("/api/alarms/{alarm_id}/ack", dependencies=CONTROL, tags=["control"],
+             responses=responses(401, 403, 404))
 def ack(alarm_id: str, state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Acknowledge an active alarm (it stays listed until its cause clears); 404 when it is
     not active."""
