@@ -260,3 +260,15 @@ def test_report_endpoint_html_and_pdf(svc):
     assert code == 200 and ctype == "application/pdf" and body.startswith(b"%PDF-")
     assert _call(svc, "GET", f"/api/recordings/{rid}/report?format=doc")[0] == 422
     assert _call(svc, "GET", "/api/recordings/none-such/report")[0] == 404
+
+
+def test_serve_refuses_a_bad_alarm_entry_in_one_line(tmp_path):
+    from conftest import run_cli
+
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text('[[alarms]]\ncolumn = "height_m"\nmax = 100.0\n')
+    r = run_cli("serve", "--config", str(cfg), "--port", "0", "--data-dir", str(tmp_path / "d"),
+                timeout=60)
+    err = r.stderr.decode().strip()
+    assert r.returncode == 2 and len(err.splitlines()) == 1, err
+    assert "alarms[0]: column 'height_m' is not a decoded column" in err
