@@ -28,7 +28,7 @@ from radar_io.errors import SpecError
 from radar_io.wirespec.frame import CrcSpec
 from radar_io.errors import UplinkError
 from radar_io.encoding.kinematics import KINEMATIC_COLUMNS, Kinematics
-from radar_io.wirespec.reading import crc_spec, positive, read_toml, req, tables
+from radar_io.wirespec.reading import crc_spec, keys, positive, read_toml, req, tables
 
 SCALINGS = ("full_scale", "raw_bits", "zero")
 #: how to get a missing source column
@@ -75,8 +75,11 @@ class TelemetrySpec:
 def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
     """Load and validate ``firmware_specs/tlm1.toml`` (or ``path``); SpecError names the problem."""
     doc, p, sha = read_toml(path, "tlm1.toml")
+    keys(doc, "frame crc kinematics channel", p)
     fr = req(doc, "frame", dict, p)
     where = f"{p} [frame]"
+    keys(fr, "name spec_version length_bytes byte_order sync_word seq_offset full_scale_count "
+         "cycle_s", where)
     length = req(fr, "length_bytes", int, where)
     if req(fr, "byte_order", str, where) != "big":
         raise SpecError(f"{where}: only byte_order = 'big' is supported")
@@ -102,6 +105,7 @@ def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
         cw = f"{p} [[channel]] #{i + 1}"
         name = req(c, "name", str, cw)
         cw = f"{p} channel {name!r}"
+        keys(c, "number name offset source scaling full_scale unit description", cw)
         off = req(c, "offset", int, cw)
         if off % 2:
             raise SpecError(f"{cw}: offset must be even (16-bit words)")
@@ -125,6 +129,9 @@ def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
         if len(set(vals)) != len(vals):
             raise SpecError(f"{p}: channel {attr}s must be unique")
     k = doc.get("kinematics", {})
+    if not isinstance(k, dict):
+        raise SpecError(f"{p}: [kinematics] must be a table")
+    keys(k, "window_s min_span_s min_samples", f"{p} [kinematics]")
     kin = (positive(k, "window_s", f"{p} [kinematics]", 1.0),
            positive(k, "min_span_s", f"{p} [kinematics]", 0.5),
            int(positive(k, "min_samples", f"{p} [kinematics]", 10)))
