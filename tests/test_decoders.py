@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +20,15 @@ EXACT = ("seq", "tod_s", "sr_m", "dsr_m", "el_deg", "del_deg", "az_deg", "daz_de
          "go", "rx_good", "sync", "sr_c_m", "el_c_deg", "az_c_deg", "auto", "servo_bw", "status_raw")
 VEC_KEYS = {"sr_c": "sr_c_m", "el_c": "el_c_deg", "az_c": "az_c_deg", "x": "x_m", "y": "y_m",
             "h": "h_m"}
+
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="module")
+def vectors() -> dict:
+    """The shared RDR1 vectors, copied into tests/data (see tests/data/README.md)."""
+    return json.loads((DATA / "rdr1_vectors.json").read_text())
 
 
 def _same(got, want, tol: float = 0.0) -> bool:
