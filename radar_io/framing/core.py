@@ -303,7 +303,8 @@ class BatchFramer:
 
     def feed_blocks(self, data: bytes | bytearray | memoryview) -> list[np.ndarray]:
         """As :meth:`feed`, but the frames come as a list of cache-sized blocks (no final copy)."""
-        buf = self._tail + bytes(data) if self._tail else bytes(data)
+        # no copy of the input unless a partial frame waits from the last call
+        buf: Any = self._tail + bytes(data) if self._tail else data
         b = np.frombuffer(buf, dtype=np.uint8)
         n, L = b.size, self._L
         last = n - L
@@ -327,7 +328,7 @@ class BatchFramer:
                     pos += k * L
                     continue
             pos = self._search(b, rows, pos, min(last + 1, pos + self.WINDOW_BYTES), blocks)
-        self._tail = buf[pos:]
+        self._tail = bytes(buf[pos:])
         for w in blocks:
             self.stats.frames += w.shape[0]
             seq = (w[:, self._seq_word] if self._seq_word is not None
