@@ -39,7 +39,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except RadarIOError as exc:
-        print(f"radar-io: error: {exc}", file=sys.stderr)
+        from radar_io.textfiles import one_line
+
+        print(f"radar-io: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

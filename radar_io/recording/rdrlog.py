@@ -197,8 +197,10 @@ class RecordingReader:
             raise RecordingError(f"{self.path}: header damaged or truncated")
         try:
             doc = json.loads(hdr)
-        except json.JSONDecodeError as exc:
+        except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
             raise RecordingError(f"{self.path}: header is not valid JSON") from exc
+        if not isinstance(doc, dict):
+            raise RecordingError(f"{self.path}: header is not a JSON object")
         if doc.get("format") != FORMAT:
             raise RecordingError(f"{self.path}: unsupported recording format {doc.get('format')!r}")
         return doc
