@@ -17,7 +17,7 @@ from radar_io.errors import RadarIOError
 COMMANDS = (
     "radar_io.cli.decode", "radar_io.cli.simulate", "radar_io.cli.monitor",
     "radar_io.cli.serve", "radar_io.cli.bench", "radar_io.cli.calibrate",
-    "radar_io.cli.runway", "radar_io.cli.airborne",
+    "radar_io.cli.runway", "radar_io.cli.airborne", "radar_io.cli.archive",
 )
 
 
