@@ -166,3 +166,27 @@ def test_udp_sink_sends_one_block_per_datagram_and_file_writer(tmp_path):
     enc = write_asterix([cols], str(path), site=types.SimpleNamespace(asterix_sac=7,
                                                                        asterix_sic=8))
     assert path.read_bytes() == b"".join(grams) and enc.records == st["records"]
+
+
+def test_file_writer_appears_only_when_complete(tmp_path):
+    from radar_io.sinks.asterix import AsterixFileWriter
+
+    batch = flight(2000, seed=5)
+    cols = {c: batch[c] for c in batch.columns}
+    out = tmp_path / "run.ast"
+    with pytest.raises(RuntimeError):
+        with AsterixFileWriter(str(out), metadata={"site": "demo"}) as w:
+            w.write(cols)
+            raise RuntimeError("interrupted")
+    assert list(tmp_path.iterdir()) == []          # aborted: no file, no leftover part
+    w = AsterixFileWriter(str(out), site=types.SimpleNamespace(asterix_sac=3, asterix_sic=4))
+    w.open()
+    w.write(cols)
+    assert not out.exists()
+    w.close()
+    got = decode_records(out.read_bytes())
+    valid = (batch["rx_good"] == 1) & (batch["go"] == 1)
+    assert len(got["sr_m"]) == valid.sum() == w.stats()["records"]
+    assert (got["sic"] == 4).all() and [p.name for p in tmp_path.iterdir()] == ["run.ast"]
+    with pytest.raises(ConfigError, match="cannot write"):
+        AsterixFileWriter(str(tmp_path / "no" / "x.ast")).open()

@@ -184,12 +184,12 @@ def decode_records(data: bytes) -> dict[str, np.ndarray]:
 
 def write_asterix(batches: Iterable[Mapping[str, np.ndarray]], path: str, *,
                   site: Any = None, encoder: Cat048Encoder | None = None) -> Cat048Encoder:
-    """Write concatenated CAT048 data blocks of every batch to ``path`` (``OUT.ast``);
-    returns the encoder (its ``records``, ``blocks``, ``saturation``)."""
-    from radar_io.sinks.asterix import AsterixSink
+    """Write concatenated CAT048 data blocks of every batch to ``path`` (``OUT.ast``; the file
+    appears only when complete); returns the encoder (``records``, ``blocks``, ``saturation``)."""
+    from radar_io.sinks.asterix import AsterixFileWriter
 
     enc = encoder or (Cat048Encoder.for_site(site) if site is not None else Cat048Encoder())
-    with AsterixSink(path, enc) as sink:
+    with AsterixFileWriter(path, encoder=enc) as sink:
         for b in batches:
             sink.write(b)
     return enc
