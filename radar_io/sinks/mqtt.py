@@ -10,8 +10,9 @@ Topics:
 * ``PREFIX/sync`` — one JSON object per sync event (SYNC 0→1 edge).
 
 :class:`MqttPublisher` never blocks its caller (the acquisition thread): ``submit``
-puts into a bounded queue and counts what does not fit, and what arrives while the
-broker is away is dropped and counted (``dropped``), never queued without bound.
+appends to a bounded deque (no lock, no wake-up of another thread: the publisher
+thread collects every ``batch_s``) and counts what does not fit; what arrives while
+the broker is away is dropped and counted (``dropped``), never queued without bound.
 paho's network thread reconnects with back-off (0.1 s doubling to 2 s, so a broker
 back after a restart is used again within ~2 s). User and password come from the
 arguments (the config) or ``RADAR_IO_MQTT_USER`` / ``RADAR_IO_MQTT_PASSWORD``; they
@@ -24,10 +25,10 @@ import json
 import logging
 import math
 import os
-import queue
 import threading
 import time
 import urllib.parse
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -131,12 +132,14 @@ class MqttPublisher:
         self.batch_s, self.status_period_s = batch_s, status_period_s
         self.max_batch_messages = max_batch_messages
         self._status_fn, self._sync_fn = status, sync_events
-        self._q: queue.Queue[list[tuple[int, str]] | None] = queue.Queue(max_queue)
+        self._q: deque[list[tuple[int, str]]] = deque()
+        self.max_queue = max_queue
         self._lock = threading.RLock()  # paho may call on_publish inside publish()
         self._pending: dict[int, int] = {}   # mid → messages in that track payload
         self.connected = False
         self.published = 0        #: track messages acknowledged (QoS 1) / sent (QoS 0)
-        self.dropped = 0          #: track messages dropped (queue full, broker away, refused)
+        self._dropped_full = 0    # queue full (written by the submitting thread only)
+        self._dropped_away = 0    # broker away or publish refused (publisher thread)
         self.reconnects = 0
         self.last_error: str | None = None
         self.status_published = 0
@@ -153,17 +156,21 @@ class MqttPublisher:
         """Queue numbered ``(msg_seq, json_text)`` messages; a full queue drops (counted)."""
         if not items:
             return
-        try:
-            self._q.put_nowait(items)
-        except queue.Full:
-            with self._lock:
-                self.dropped += len(items)
+        if len(self._q) >= self.max_queue:
+            self._dropped_full += len(items)
+        else:
+            self._q.append(items)  # atomic; the publisher thread polls
+
+    @property
+    def dropped(self) -> int:
+        """Track messages dropped: queue full, broker away, publish refused."""
+        return self._dropped_full + self._dropped_away
 
     def stats(self) -> dict[str, Any]:
         """``publish.mqtt`` of ``/api/status``."""
         return {"url": self.url, "connected": self.connected, "published": self.published,
                 "dropped": self.dropped, "reconnects": self.reconnects,
-                "last_error": self.last_error, "queued": self._q.qsize(),
+                "last_error": self.last_error, "queued": len(self._q),
                 "last_msg_seq": self.last_msg_seq, "status_published": self.status_published,
                 "sync_published": self.sync_published}
 
@@ -202,10 +209,6 @@ class MqttPublisher:
     def close(self, timeout_s: float = 2.0) -> None:
         """Flush, publish ``{"online": false}`` (retained), disconnect; never raises."""
         self._stop.set()
-        try:
-            self._q.put_nowait(None)
-        except queue.Full:
-            pass
         if self._thread is not None:
             self._thread.join(timeout_s + 1.0)
         c, self._client = self._client, None
@@ -250,41 +253,32 @@ class MqttPublisher:
 
     # -- the publisher thread ------------------------------------------------------------------
     def _run(self) -> None:
-        buf: list[tuple[int, str]] = []
-        first = 0.0
-        next_status = next_sync = time.monotonic()
+        next_flush = next_status = time.monotonic()
         while True:
+            stopping = self._stop.wait(max(min(next_flush, next_status) - time.monotonic(), 0.0))
             now = time.monotonic()
-            wait = min(next_status, first + self.batch_s if buf else now + self.batch_s) - now
-            try:
-                items = self._q.get(timeout=max(wait, 0.0))
-            except queue.Empty:
-                items = []
-            if items is None:
+            if stopping or now >= next_flush:
+                self._flush()
+                if self._sync_fn is not None:
+                    self._publish_sync()
+                next_flush = now + self.batch_s
+            if stopping:
                 break
-            if items:
-                if not buf:
-                    first = time.monotonic()
-                buf.extend(items)
-            now = time.monotonic()
-            if buf and (now - first >= self.batch_s or len(buf) >= self.max_batch_messages):
-                self._publish_track(buf)
-                buf = []
-            if self._sync_fn is not None and now >= next_sync:
-                self._publish_sync()
-                next_sync = now + self.batch_s
             if now >= next_status:
                 self._publish_status()
                 next_status = max(next_status + self.status_period_s, now)
-        if buf:  # flush what was queued before close
+
+    def _flush(self) -> None:
+        """Publish what was submitted since the last flush (≤ ``batch_s`` old)."""
+        buf: list[tuple[int, str]] = []
+        q = self._q
+        while q:
+            buf.extend(q.popleft())
+            if len(buf) >= self.max_batch_messages:
+                self._publish_track(buf)
+                buf = []
+        if buf:
             self._publish_track(buf)
-        while True:
-            try:
-                rest = self._q.get_nowait()
-            except queue.Empty:
-                break
-            if rest:
-                self._publish_track(rest)
 
     def _publish(self, topic: str, payload: str, *, retain: bool = False) -> Any:
         """paho publish; None (and last_error) when not connected or refused."""
@@ -308,7 +302,7 @@ class MqttPublisher:
         with self._lock:  # register the mid before paho's thread can acknowledge it
             info = self._publish(self.target.topic("track"), payload)
             if info is None:
-                self.dropped += len(buf)
+                self._dropped_away += len(buf)
                 return
             self._pending[info.mid] = len(buf)
         self.last_msg_seq = buf[-1][0]
