@@ -18,6 +18,8 @@ from radar_io.sinks.base import Batch, Sink
 SINKS: dict[str, str] = {
     "tlm1": "radar_io.sinks.uplink:TelemetrySink",
     "da": "radar_io.sinks.uplink:DASink",
+    "asterix": "radar_io.sinks.asterix:AsterixSink",
+    "mqtt": "radar_io.sinks.mqtt:MqttSink",
 }
 
 
