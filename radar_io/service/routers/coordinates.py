@@ -14,8 +14,7 @@ MAX_POINTS = 100_000  #: points accepted in one request
 
 router = APIRouter(tags=["coordinates"])
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Column = Annotated[list[Finite], Field(min_length=1, max_length=MAX_POINTS)]
+Column = Annotated[list[float], Field(min_length=1, max_length=MAX_POINTS)]
 
 
 class RunwayPoints(BaseModel):
@@ -45,6 +44,10 @@ def runway_to_radar(req: RunwayPoints, request: Request) -> dict[str, Any]:
     site = request.app.state.service.site
     if site is None:
         raise HTTPException(404, "no radar site configured (serve --site SITE.toml)")
-    x, y, h = transforms.runway_to_radar(np.asarray(req.xr_m), np.asarray(req.yr_m),
-                                         np.asarray(req.hr_m), site)
+    cols = {k: np.asarray(getattr(req, k), dtype=float) for k in ("xr_m", "yr_m", "hr_m")}
+    for k, v in cols.items():  # checked here: a 422 echoing NaN in its body is not JSON
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise HTTPException(422, f"{k}[{bad[0]}] is not a finite number")
+    x, y, h = transforms.runway_to_radar(cols["xr_m"], cols["yr_m"], cols["hr_m"], site)
     return {"site": site.name, "x_m": x.tolist(), "y_m": y.tolist(), "h_m": h.tolist()}
