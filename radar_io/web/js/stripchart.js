@@ -36,6 +36,7 @@ function options(column, i) {
   const axis = { stroke: "#7a8494", grid: { stroke: "#30363d", width: 1 }, ticks: { stroke: "#30363d" } };
   return {
     width: 640, height: 140, legend: { show: true },
+    tzDate: (ts) => uPlot.tzDate(new Date(ts * 1e3), "Etc/UTC"), // axis in UTC, not browser time
     scales: { x: { time: true } },
     series: [{ label: "UTC" }, { label: column, stroke: COLORS[i % COLORS.length], width: 1.5, spanGaps: false }],
     axes: [{ ...axis }, { ...axis, size: 60 }],
