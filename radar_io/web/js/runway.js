@@ -72,8 +72,10 @@ export function initRunway() {
   $("rw-canvas").onclick = (ev) => {
     if (!RW.img) return;
     const cv = $("rw-canvas"), r = cv.getBoundingClientRect();
-    // canvas position (0 at the image's left edge) → pixel coordinates (0 at the first pixel's centre)
-    const u = ((ev.clientX - r.left) * cv.width) / r.width - 0.5, v = ((ev.clientY - r.top) * cv.height) / r.height - 0.5;
+    // position in the canvas's content box (inside its border; 0 at the image's left edge)
+    // → pixel coordinates (0 at the first pixel's centre)
+    const x = ev.clientX - r.left - cv.clientLeft, y = ev.clientY - r.top - cv.clientTop;
+    const u = (x * cv.width) / cv.clientWidth - 0.5, v = (y * cv.height) / cv.clientHeight - 0.5;
     RW.points[$("rw-line").value].push([u, v]);
     rwDraw();
   };
