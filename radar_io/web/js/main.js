@@ -45,4 +45,5 @@ connect();
 poll();
 setInterval(poll, 500);
 requestAnimationFrame(render);
+window.radarReadyAt = performance.now(); // ms since navigation start
 window.radarReady = true;
