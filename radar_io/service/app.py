@@ -452,9 +452,11 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
             "recordings": sorted(events), "pairs": len(pairs)})
         return {"pairs": pairs, "statistics": stats, "calibration": cal.to_dict()}
 
+    from radar_io.service.routers.coordinates import router as coordinates_router
     from radar_io.service.routers.runway import router as runway_router
 
     app.include_router(runway_router)
+    app.include_router(coordinates_router)
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
 
     @app.get("/", include_in_schema=False)
