@@ -39,6 +39,7 @@ class ServiceConfig:
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
     can: str | None = None           #: aircraft air data: python-can "interface:channel"
     can_bitrate: int | None = None
+    alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] limits (service/alarms.py)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def resolved_site(self) -> str | None:
