@@ -374,9 +374,18 @@ $("rw-go").onclick = async () => {
   if (!file) { $("rw-result").textContent = "choose an image or a video first"; return; }
   $("rw-result").textContent = "…";
   const q = `focal_px=${$("rw-f").value}&half_width_m=${$("rw-d").value}`;
-  const res = await fetch(`/api/runway?${q}`, { method: "POST", body: file, headers: { "Content-Type": file.type || "application/octet-stream" } });
-  const doc = await res.json();
+  const res = await fetch(`/api/runway?${q}`, { method: "POST", body: file, headers: { "Content-Type": file.type || "application/octet-stream", Authorization: `Bearer ${token.value}` } });
+  let doc = await res.json();
   if (!res.ok) { $("rw-result").textContent = `${res.status}: ${typeof doc.detail === "string" ? doc.detail : JSON.stringify(doc.detail)}`; return; }
+  if (res.status === 202) { // a video: a job on the server, polled until it ends
+    for (;;) {
+      await new Promise((ok) => setTimeout(ok, 500));
+      const job = await (await fetch(doc.status_url)).json();
+      $("rw-result").textContent = `${job.state}: ${job.frames_done} / ${job.frames_total ?? "?"} frames`;
+      if (job.state === "done") { doc = job.result; break; }
+      if (job.state === "failed" || job.state === "cancelled") { $("rw-result").textContent = `${job.state}: ${job.error || ""}`; return; }
+    }
+  }
   if (doc.frames) { RW.result = doc; $("rw-result").textContent = doc.frames.map((r) => `#${r.frame} ` + (r.found ? `bank ${r.bank_deg} pitch ${r.pitch_deg} yaw ${r.yaw_deg} h ${r.height_m} lat ${r.lateral_m} q ${r.quality}` : `not found: ${r.reason}`)).join("\n"); return; }
   if (doc.overlay_png_base64) await rwLoadImage("data:image/png;base64," + doc.overlay_png_base64, doc.image.width, doc.image.height);
   rwShow(doc);
