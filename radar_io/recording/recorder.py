@@ -14,6 +14,7 @@ space with a low-space warning below ``low_space_bytes``.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -31,6 +32,8 @@ from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.wirespec.frame import FrameSpec
 
 AUTO_MODES = ("go", "manual", "always")
+#: errno values that mean "no room": HTTP 507 (other disk errors: 503)
+NO_SPACE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})  # EFBIG: size limit
 LOW_SPACE_BYTES = 1 << 30  #: default low-space warning threshold (1 GiB)
 
 log = logging.getLogger("radar_io.recording")
@@ -234,6 +237,11 @@ class Recorder:
         if w is None or w.path.stem != rec_id:
             return None
         return w.committed_bytes
+
+    @staticmethod
+    def http_status(exc: StorageError) -> int:
+        """507 when the disk has no room (ENOSPC, EDQUOT, EFBIG), else 503."""
+        return 507 if exc.errno in NO_SPACE_ERRNOS else 503
 
     def storage(self) -> dict[str, Any]:
         """Free space of the recordings directory and the last disk error."""

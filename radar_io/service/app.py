@@ -18,7 +18,7 @@ from starlette.websockets import WebSocketDisconnect
 
 from radar_io import __version__
 from radar_io.decoding.biases import Calibration, load_calibration, save_calibration, utc_now_iso
-from radar_io.errors import ConfigError, RadarIOError
+from radar_io.errors import ConfigError, RadarIOError, StorageError
 from radar_io.coordinates.transforms import load_site
 from radar_io.wirespec.frame import load_spec
 from radar_io.service.acquisition import Acquisition
@@ -89,7 +89,9 @@ class Service:
         self.history = History(cfg.history_size)
         self.hub = Hub(self.history, cfg.ws_queue_size)
         self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
-                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s)
+                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s,
+                                 retry_s=cfg.retry_s,  # storage branch
+                                 low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
@@ -165,6 +167,7 @@ class Service:
         st = self.acq.status()
         st.update(self.hub.stats())
         st["recording"] = self.recorder.current
+        st["storage"] = self.recorder.storage()  # storage branch: free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.acq.calibration.id
         st["control_enabled"] = self.token is not None
@@ -285,9 +288,19 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
         return out
 
     @app.get("/api/recordings/{rec_id}", tags=["recordings"])
-    def download(rec_id: str) -> FileResponse:
-        """The .rdrlog file itself."""
+    def download(rec_id: str) -> Any:
+        """The .rdrlog file itself; a recording still being written comes as a snapshot up to
+        its last whole chunk at request time (Content-Length = body, a prefix of the file)."""
         p = svc.recording_path(rec_id)
+        size = svc.recorder.committed_bytes(rec_id)  # storage branch: snapshot of an open file
+        if size is not None:
+            from fastapi.responses import StreamingResponse
+
+            from radar_io.recording.rdrlog import iter_prefix
+
+            return StreamingResponse(iter_prefix(p, size), media_type="application/octet-stream",
+                                     headers={"Content-Length": str(size),
+                                              "Content-Disposition": f'attachment; filename="{p.name}"'})
         return FileResponse(p, media_type="application/octet-stream", filename=p.name)
 
     @app.get("/api/sync-events", tags=["recordings"])
@@ -308,7 +321,10 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
     def rec_start() -> dict[str, Any]:
         if svc.acq.mode != "live":
             raise HTTPException(409, "cannot record while replaying")
-        return {"recording": svc.recorder.start("manual")}
+        try:
+            return {"recording": svc.recorder.start("manual")}
+        except StorageError as exc:  # storage branch: 507 no space, 503 other disk errors
+            raise HTTPException(svc.recorder.http_status(exc), str(exc)) from exc
 
     @app.post("/api/recordings/stop", tags=["control"], dependencies=control)
     def rec_stop() -> dict[str, Any]:
