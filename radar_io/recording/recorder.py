@@ -85,6 +85,7 @@ class Recorder:
         self.storage_errors = 0
         self._want: str | None = None             #: automatic recording wanted ("go"/"always")
         self._next_try = 0.0                      #: monotonic time of the next automatic retry
+        self._retry = False                       #: an automatic recording failed: retry it
         if auto == "always":
             self._want = "always"
             self._try_auto()
@@ -111,7 +112,7 @@ class Recorder:
                 except RadarIOError as exc:
                     self._fail(exc)
                 return
-            if self._want is None or time.monotonic() < self._next_try:
+            if not self._retry or self._want is None or time.monotonic() < self._next_try:
                 return
         self._try_auto()
 
@@ -133,6 +134,7 @@ class Recorder:
             self.storage_error = str(exc)
             self.storage_errors += 1
         self._next_try = time.monotonic() + self.retry_s
+        self._retry = self._want is not None
         log.error("recording: %s", exc)
 
     def _try_auto(self) -> None:
@@ -209,6 +211,7 @@ class Recorder:
                     raise
                 self._writer = writer
                 self.last_error = None
+                self._retry = False
                 log.info("recording %s started (%s)", path.name, reason)
             if reason == "manual":
                 self._manual = True  # a GO fall no longer ends it
@@ -219,8 +222,8 @@ class Recorder:
         in ``last_error`` (the file stays, as complete as the disk allowed)."""
         with self._lock:
             self._manual = False
-            if self._want == "always":
-                self._want = None  # an operator's stop wins until resume_live
+            self._want = None  # an operator's stop (or GO falling) wins: no automatic restart
+            self._retry = False
             w, self._writer = self._writer, None
             if w is None:
                 return None
@@ -261,7 +264,6 @@ class Recorder:
             self._pre_bytes = 0
         if self.auto == "always":
             self._want = "always"
-            self._next_try = 0.0
             self._try_auto()
 
     @property
