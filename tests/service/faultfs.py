@@ -1,7 +1,8 @@
-"""Fault injection for a service in a child process: ``python faultfs.py FLAGDIR serve …``.
+"""Fault injection for a service in a child process, loaded by a ``sitecustomize.py``
+(:func:`shim`) when ``RADAR_FAULTFS_FLAGS`` and ``RADAR_FAULTFS_DIR`` are set.
 
-Real files, real service; only the OS calls on files under ``FLAGDIR/../data/recordings``
-are patched. While ``FLAGDIR/full`` exists, ``os.write`` to such a file writes half
+Real files, real service; only the OS calls on files under ``RADAR_FAULTFS_DIR`` (the
+recordings directory) are patched, through flag files in ``RADAR_FAULTFS_FLAGS``. While ``FLAGDIR/full`` exists, ``os.write`` to such a file writes half
 of what it was given and raises ENOSPC, as a filling disk does (new files can still be
 created: a full disk usually has inodes left); while ``FLAGDIR/fsync`` exists, ``os.fsync`` raises EIO. Used by
 test_storage_faults.py (no tiny tmpfs can be mounted in the test environment).
@@ -11,7 +12,6 @@ from __future__ import annotations
 
 import errno
 import os
-import sys
 
 
 def install(flag_dir: str, rec_dir: str) -> None:
@@ -40,11 +40,18 @@ def install(flag_dir: str, rec_dir: str) -> None:
     os.write, os.fsync = fwrite, ffsync
 
 
-if __name__ == "__main__":
-    flag_dir = os.path.abspath(sys.argv[1])
-    argv = sys.argv[2:]
-    data_dir = os.path.abspath(argv[argv.index("--data-dir") + 1])
-    install(flag_dir, os.path.join(data_dir, "recordings"))
-    from radar_io.cli.main import main
+def install_from_env() -> None:
+    flags, rec_dir = os.environ.get("RADAR_FAULTFS_FLAGS"), os.environ.get("RADAR_FAULTFS_DIR")
+    if flags and rec_dir:
+        install(os.path.abspath(flags), os.path.abspath(rec_dir))
 
-    sys.exit(main(argv))
+
+def shim(directory: str) -> str:
+    """Write a ``sitecustomize.py`` into ``directory`` that installs the faults at start;
+    returns a PYTHONPATH with it first."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    with open(os.path.join(directory, "sitecustomize.py"), "w", encoding="utf-8") as f:
+        f.write(f"import sys\nsys.path.insert(0, {here!r})\nimport faultfs\n"
+                "faultfs.install_from_env()\n")
+    return os.pathsep.join([directory] + [p for p in os.environ.get("PYTHONPATH", "").split(
+        os.pathsep) if p])

@@ -34,7 +34,7 @@ Q = f"/api/runway?focal_px={F}&half_width_m=22.5"
 def svc(tmp_path_factory):
     d = tmp_path_factory.mktemp("rw")
     cfg = d / "serve.toml"
-    cfg.write_text(f"runway_max_upload_mb = {LIMIT_MB}\nrunway_queue = 2\n")
+    cfg.write_text(f"max_upload_mb = {LIMIT_MB}\nrunway_queue = 2\n")
     s = ServeProcess("sim://", d / "data", extra=("--config", str(cfg)),
                      env={"RADAR_IO_TOKEN": TOKEN})
     s.wait_ready()
@@ -120,7 +120,7 @@ def test_no_runway_and_bad_uploads(svc):
     code, doc = post(svc, Q, png.tobytes(), "image/png")
     assert code == 200 and doc["found"] is False and doc["reason"]
     code, doc = post(svc, f"/api/runway?focal_px={F}&half_width_m=22.5", b"not an image", "image/png")
-    assert code == 422 and "cannot decode" in doc["detail"]
+    assert code == 422 and "cannot decode" in doc["detail"][0]["msg"]  # one error shape: a list
     code, doc = post(svc, "/api/runway?half_width_m=22.5", png.tobytes(), "image/png")
     assert code == 422 and "focal_px" in json.dumps(doc)
 
@@ -152,7 +152,7 @@ def test_upload_a_frame_sequence(svc, tmp_path):
 def test_uploads_need_the_token(svc):
     _, png = cv2.imencode(".png", render_runway(POSE, W, H, F))
     code, doc = post(svc, Q, png.tobytes(), "image/png", token=None)
-    assert code == 401 and "Bearer" in doc["detail"]
+    assert code == 401 and "Bearer" in doc["detail"][0]["msg"]
     code, doc = post(svc, Q, png.tobytes(), "image/png", token="wrong")
     assert code == 403
     code, doc = request(svc, "DELETE", "/api/runway/jobs/x", token=None)
@@ -187,7 +187,7 @@ def test_declared_oversize_body_is_refused_before_it_is_sent(svc):
         code, doc = read_response(s)  # not one body byte sent
     finally:
         s.close()
-    assert code == 413 and str(size) in doc["detail"]
+    assert code == 413 and str(size) in doc["detail"][0]["msg"]
 
 
 def test_streamed_oversize_body_is_refused_while_reading(svc):
@@ -208,7 +208,7 @@ def test_streamed_oversize_body_is_refused_while_reading(svc):
         code, doc = read_response(s)
     finally:
         s.close()
-    assert code == 413 and "larger than" in doc["detail"]
+    assert code == 413 and "more than" in doc["detail"][0]["msg"]
     assert LIMIT_MB <= sent < 4 * LIMIT_MB  # answered after the limit, long before the end
 
 
@@ -225,7 +225,7 @@ def test_queue_full_429_and_cancel(svc, long_video):
         code, doc = read_response(s)
     finally:
         s.close()
-    assert code == 429 and "queue full" in doc["detail"]
+    assert code == 429 and "queue full" in doc["detail"][0]["msg"]
     # cancel a waiting job: at once
     code, doc = request(svc, "DELETE", f"/api/runway/jobs/{jobs[2]}")
     assert code == 200 and doc["state"] == "cancelled" and doc["frames_done"] == 0

@@ -1,7 +1,7 @@
 """Storage faults on a live service (issue 10 item 3) and downloads of an open recording
 (item 4): a full disk at start, at a GO edge and mid-recording; fsync errors; kill -9.
 
-The service runs in a child process through ``faultfs.py``, which makes the recordings
+The service runs in a child process with ``faultfs.py`` loaded, which makes the recordings
 directory "full" (ENOSPC) or its fsync fail (EIO) while a flag file exists.
 """
 
@@ -21,18 +21,18 @@ from pathlib import Path
 import pytest
 
 import independent
-from radar_io.benchmarks.service_load import Pty, ServeProcess, free_port
+from radar_io.benchmarks.service_load import Pty, ServeProcess
 from radar_io.recording.rdrlog import RecordingReader
 from radar_io.framing.framers import Framer
 
+from . import faultfs
 from .test_live_pty import wait_for
 
 TOKEN = "disk-token"
-FAULTFS = Path(__file__).with_name("faultfs.py")
 
 
 class FaultyServe(ServeProcess):
-    """``radar-io serve`` under faultfs.py: ``full(True)`` fills the recordings disk."""
+    """``radar-io serve`` with faultfs: ``full(True)`` fills the recordings disk."""
 
     def __init__(self, source: str, tmp: Path, config: str = "", extra: tuple[str, ...] = ()) -> None:
         self.flags = tmp / "flags"
@@ -41,14 +41,12 @@ class FaultyServe(ServeProcess):
         self.recdir = self.data / "recordings"
         cfg = tmp / "serve.toml"
         cfg.write_text(config)
-        self.port = free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
-        self.proc = subprocess.Popen(
-            [sys.executable, str(FAULTFS), str(self.flags), "serve", "--source", source,
-             "--host", "127.0.0.1", "--port", str(self.port), "--data-dir", str(self.data),
-             "--config", str(cfg), *extra],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-            env={**os.environ, "RADAR_IO_TOKEN": TOKEN})
+        shim_dir = tmp / "shim"
+        shim_dir.mkdir()
+        super().__init__(source, self.data, extra=("--config", str(cfg), *extra),
+                         env={"RADAR_IO_TOKEN": TOKEN, "PYTHONPATH": faultfs.shim(str(shim_dir)),
+                              "RADAR_FAULTFS_FLAGS": str(self.flags),
+                              "RADAR_FAULTFS_DIR": str(self.recdir)})
 
     def full(self, on: bool) -> None:
         self._flag("full", on)
@@ -103,7 +101,8 @@ def test_manual_start_on_a_full_disk(tmp_path):
         svc.full(True)
         code, doc = svc.post("/api/recordings/start")
         assert code == 507, doc
-        assert "No space left on device" in doc["detail"] and "recordings" in doc["detail"]
+        msg = doc["detail"][0]["msg"]
+        assert "No space left on device" in msg and "recordings" in msg
         fds = len(svc.fds())
         for _ in range(20):
             assert svc.post("/api/recordings/start")[0] == 507
