@@ -55,6 +55,7 @@ class ServiceConfig:
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
     can: str | None = None           #: aircraft air data: python-can "interface:channel"
     can_bitrate: Annotated[int, Gt(0)] | None = None
+    alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:
         if self.site:
