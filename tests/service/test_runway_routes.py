@@ -77,7 +77,7 @@ def test_no_runway_and_bad_uploads(svc):
     code, doc = post(svc, f"/api/runway?focal_px={F}&half_width_m=22.5", png.tobytes(), "image/png")
     assert code == 200 and doc["found"] is False and doc["reason"]
     code, doc = post(svc, f"/api/runway?focal_px={F}&half_width_m=22.5", b"not an image", "image/png")
-    assert code == 422 and "cannot decode" in doc["detail"]
+    assert code == 422 and "cannot decode" in doc["detail"][0]["msg"]  # one error shape: a list
     code, doc = post(svc, "/api/runway?half_width_m=22.5", png.tobytes(), "image/png")
     assert code == 422 and "focal_px" in json.dumps(doc)
 

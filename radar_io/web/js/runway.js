@@ -1,7 +1,7 @@
 // Runway vision panel: upload an image or a video for the automatic pose, or pick points on
 // the image for the manual pose (runway-vision.md). window.runwayState for the tests.
 import { $ } from "./state.js";
-import { request } from "./api.js";
+import { authHeader, request } from "./api.js";
 
 const RW = (window.runwayState = { img: null, width: 0, height: 0, points: { horizon: [], left_edge: [], right_edge: [] }, lines: null, result: null, lastManual: null });
 const RW_COLORS = { horizon: "#50dc50", left_edge: "#e63c3c", right_edge: "#2878e6" };
@@ -46,7 +46,7 @@ async function estimate() {
   const q = `focal_px=${$("rw-f").value}&half_width_m=${$("rw-d").value}`;
   let doc;
   try {
-    doc = await request(`/api/runway?${q}`, { method: "POST", body: file, raw: true, headers: { "Content-Type": file.type || "application/octet-stream" } });
+    doc = await request(`/api/runway?${q}`, { method: "POST", body: file, raw: true, headers: { ...authHeader(), "Content-Type": file.type || "application/octet-stream" } });
   } catch (e) { $("rw-result").textContent = e.message; return; }
   if (doc.frames) { RW.result = doc; $("rw-result").textContent = doc.frames.map((r) => `#${r.frame} ` + (r.found ? `bank ${r.bank_deg} pitch ${r.pitch_deg} yaw ${r.yaw_deg} h ${r.height_m} lat ${r.lateral_m} q ${r.quality}` : `not found: ${r.reason}`)).join("\n"); return; }
   if (doc.overlay_png_base64) await rwLoadImage("data:image/png;base64," + doc.overlay_png_base64, doc.image.width, doc.image.height);
@@ -57,7 +57,7 @@ async function manual() {
   if (!RW.img) { $("rw-result").textContent = "load an image first"; return; }
   const body = { points: RW.points, focal_px: Number($("rw-f").value), half_width_m: Number($("rw-d").value), principal_point: principalPoint(RW.width, RW.height) };
   RW.lastManual = body;
-  try { rwShow(await request("/api/runway/manual", { method: "POST", body })); } catch (e) { $("rw-result").textContent = e.message; }
+  try { rwShow(await request("/api/runway/manual", { method: "POST", body, headers: authHeader() })); } catch (e) { $("rw-result").textContent = e.message; }
 }
 
 export function initRunway() {
