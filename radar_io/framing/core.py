@@ -318,7 +318,8 @@ class BatchFramer:
         while pos <= last:
             if b[pos] == hi and b[pos + 1] == lo:  # fast path: frames back to back from pos
                 m = min((n - pos) // L, self._block)
-                w = b[pos:pos + m * L].view(">u2").reshape(m, L // 2).astype(np.uint16)
+                # native words in Fortran order: each word position (column) is contiguous
+                w = b[pos:pos + m * L].view(">u2").reshape(m, L // 2).astype(np.uint16, order="F")
                 good = (w[:, 0] == self._sync) & val.crc_ok(w) & val.plausible(w)
                 k = m if good.all() else int(np.argmin(good))
                 self._block = (min(2 * self._block, self.BLOCK_FRAMES) if k == m
@@ -350,7 +351,7 @@ class BatchFramer:
         if cand.size == 0:
             st.bytes_discarded += limit - pos
             return limit
-        w = rows[cand].astype(np.uint16)
+        w = rows[cand].astype(np.uint16, order="F")
         crc = self.validator.crc_ok(w)
         plaus = self.validator.plausible(w)
         valid = crc & plaus
