@@ -328,3 +328,24 @@ def test_tlm1_both_front_ends_match_the_reference(n, seed, flips, drops, inserts
     dec.flush()
     assert dec.stats == want[1]
     assert seqs == [int.from_bytes(fr[2:4], "big") for fr in want[0]]
+
+
+@pytest.mark.parametrize("poly,init,xor_out", [(0x1021, 0xFFFF, 0), (0x8005, 0x0000, 0xFFFF),
+                                                (0x3D65, 0x1234, 0x00FF)])
+def test_affine_crc_tables_match_the_bytewise_crc(poly, init, xor_out):
+    """crc = c0 ^ T_1[w_1] ^ … ^ T_10[w_10] equals the byte-by-byte CRC (binascii for CCITT)."""
+    from radar_io.wirespec.crc import crc_function, position_tables
+    from radar_io.wirespec.frame import CrcSpec
+
+    crc = crc_function(CrcSpec("x", 16, poly, init, False, False, xor_out, 0, 22))
+    c0, tables = position_tables(poly, init, xor_out, 0xEB90, 11)
+    rng = np.random.default_rng(poly)
+    w = rng.integers(0, 65536, (500, 11), dtype=np.uint16)
+    w[:, 0] = 0xEB90
+    acc = np.full(500, c0, dtype=np.uint16)
+    for k, t in enumerate(tables, start=1):
+        acc ^= t[w[:, k]]
+    want = [crc(row.astype(">u2").tobytes()) for row in w]
+    assert acc.tolist() == want
+    if poly == 0x1021 and init == 0xFFFF:
+        assert want == [binascii.crc_hqx(row.astype(">u2").tobytes(), 0xFFFF) for row in w]
