@@ -254,3 +254,77 @@ def test_batch_framer_window_and_block_boundaries(data, window, block, seed):
         pos += n
     f.flush()
     assert (out, f.stats.as_dict()) == reference(data)
+
+
+# ---------------------------------------------------------------- TLM1 through the same core
+def tlm_frame(seq: int, words: tuple[int, ...] = (0,) * 10) -> bytes:
+    """A TLM1 frame typed in from radar-interface.md §8: SYNC 0x1ACF, SEQ, 10 x i16, CRC-16."""
+    body = b"\x1a\xcf" + seq.to_bytes(2, "big") + b"".join(
+        (w & 0xFFFF).to_bytes(2, "big") for w in words)
+    return body + binascii.crc_hqx(body, 0xFFFF).to_bytes(2, "big")
+
+
+def tlm_reference(data: bytes) -> tuple[list[bytes], dict[str, int]]:
+    """§3's rules for a 26-byte frame with no plausibility limits, byte by byte."""
+    frames, st, pos, last = [], dict(frames=0, crc_errors=0, implausible=0, bytes_discarded=0,
+                                     seq_gaps=0), 0, None
+    while pos + 26 <= len(data):
+        fr = data[pos:pos + 26]
+        if fr[:2] == b"\x1a\xcf" and binascii.crc_hqx(fr[:24], 0xFFFF) == int.from_bytes(fr[24:], "big"):
+            frames.append(fr)
+            st["frames"] += 1
+            seq = int.from_bytes(fr[2:4], "big")
+            if last is not None and (seq - last) % 65536:
+                st["seq_gaps"] += (seq - last) % 65536 - 1
+            last = seq
+            pos += 26
+            continue
+        st["crc_errors"] += fr[:2] == b"\x1a\xcf"
+        st["bytes_discarded"] += 1
+        pos += 1
+    st["bytes_discarded"] += len(data) - pos
+    return frames, st
+
+
+@pytest.mark.parametrize("seqs,gaps", [([7, 7, 8], 0), ([65535, 65535, 0], 0), ([3, 3, 3, 3], 0),
+                                       ([65535, 2], 2), ([10, 9], 65534)])
+def test_tlm1_uses_the_rdr1_seq_gap_rule(seqs, gaps):
+    """A repeated SEQ is a duplicate (0 gaps) for TLM1 too — it used to count 65 535."""
+    from radar_io.encoding.tlm1 import TelemetryDecoder
+
+    data = b"".join(tlm_frame(s) for s in seqs)
+    dec = TelemetryDecoder()
+    cols = dec.feed(data)
+    assert cols["seq"].tolist() == seqs
+    assert dec.stats["seq_gaps"] == gaps == tlm_reference(data)[1]["seq_gaps"]
+    rdr = b"".join(independent.frame(seq=s) for s in seqs)
+    assert run_per_frame(rdr, [])[1]["seq_gaps"] == gaps
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 80), st.integers(0, 10_000), st.integers(0, 30), st.integers(0, 8),
+       st.integers(0, 8), st.integers(0, 8), st.integers(1, 60))
+def test_tlm1_both_front_ends_match_the_reference(n, seed, flips, drops, inserts, garbage, mean):
+    from radar_io.encoding.tlm1 import TelemetryDecoder, load_tlm_spec
+
+    rng = random.Random(seed)
+    frames = [tlm_frame((seed + i // 3 * 2) & 0xFFFF,   # repeated and skipped SEQs
+                        tuple(rng.randrange(-32768, 32768) for _ in range(10))) for i in range(n)]
+    data = damage(b"".join(frames), seed, flips, drops, inserts, garbage).replace(
+        b"\xeb\x90", b"\x1a\xcf")                        # junk sync words of this format
+    want = tlm_reference(data)
+    sizes = chunk_sizes(len(data), seed, mean)
+    spec = load_tlm_spec()
+    f, out, pos = Framer(spec), [], 0
+    for k in [*sizes, len(data)]:
+        out += f.feed(data[pos:pos + k])
+        pos += k
+    f.flush()
+    assert (out, f.stats.as_dict()) == want
+    dec, pos, seqs = TelemetryDecoder(spec), 0, []
+    for k in [*sizes, len(data)]:
+        seqs += dec.feed(data[pos:pos + k])["seq"].tolist()
+        pos += k
+    dec.flush()
+    assert dec.stats == want[1]
+    assert seqs == [int.from_bytes(fr[2:4], "big") for fr in want[0]]

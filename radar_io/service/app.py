@@ -94,6 +94,9 @@ class Service:
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
         self._setup_outputs(cfg)
+        from radar_io.service.alarms import attach_alarms
+
+        self.alarms = attach_alarms(self)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
@@ -190,11 +193,15 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):  # type: ignore[no-untyped-def]
+        from radar_io.service.alarms import status_loop
+
         svc.hub.attach(asyncio.get_running_loop())
         svc.acq.start()
+        alarm_task = asyncio.create_task(status_loop(svc, svc.alarms))
         try:
             yield
         finally:
+            alarm_task.cancel()
             svc.acq.stop()
             svc.recorder.close()
             svc.close()
@@ -452,9 +459,16 @@ def create_app(cfg: ServiceConfig) -> FastAPI:
             "recordings": sorted(events), "pairs": len(pairs)})
         return {"pairs": pairs, "statistics": stats, "calibration": cal.to_dict()}
 
+    from radar_io.service.routers.coordinates import router as coordinates_router
     from radar_io.service.routers.runway import router as runway_router
 
+    from radar_io.service.routers.alarms import router as alarms_router
+    from radar_io.service.routers.report import router as report_router
+
     app.include_router(runway_router)
+    app.include_router(coordinates_router)
+    app.include_router(alarms_router)
+    app.include_router(report_router)
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
 
     @app.get("/", include_in_schema=False)

@@ -30,6 +30,10 @@ class ServiceConfig:
     token_file: str | None = None
     auto_record: str = "go"          #: go | manual | always
     preroll_s: float = 2.0
+    retry_s: float = 5.0             #: automatic recording: retry a failed start / write every
+    low_space_mb: float = 1024.0     #: status storage.low_space below this much free space
+    runway_queue: int = 2            #: runway video jobs waiting behind the running one (429 beyond)
+    runway_max_upload_mb: float = 512.0  #: largest runway upload (413 beyond, while reading)
     history_size: int = 120_000      #: messages kept for /api/track and ws resume (2 min at 1 kHz)
     ws_queue_size: int = 5000        #: per websocket client, oldest dropped beyond
     spec: str | None = None
@@ -39,6 +43,7 @@ class ServiceConfig:
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
     can: str | None = None           #: aircraft air data: python-can "interface:channel"
     can_bitrate: int | None = None
+    alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] limits (service/alarms.py)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def resolved_site(self) -> str | None:
@@ -81,6 +86,10 @@ def load_config(path: str | None, overrides: dict[str, Any]) -> ServiceConfig:
         raise ConfigError("auto_record must be go, manual or always")
     if cfg.can is not None and ":" not in cfg.can:
         raise ConfigError(f"can = {cfg.can!r}: expected 'interface:channel', e.g. socketcan:can0")
+    if cfg.retry_s <= 0:
+        raise ConfigError(f"retry_s = {cfg.retry_s}: must be > 0 seconds")
+    if cfg.low_space_mb < 0 or cfg.runway_max_upload_mb <= 0 or cfg.runway_queue < 0:
+        raise ConfigError("low_space_mb must be >= 0, runway_max_upload_mb > 0, runway_queue >= 0")
     if not 0 < int(cfg.port) < 65536:
         raise ConfigError(f"port {cfg.port} is out of range")
     return cfg

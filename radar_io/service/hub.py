@@ -34,9 +34,13 @@ class Client:
 
     def push(self, items: list[tuple[int, str]]) -> None:
         q = self.queue
-        if self.min_interval:  # decimated: only the newest matters
+        if self.min_interval:  # decimated: only the newest matters (events are all kept)
+            events = [it for it in (*q, *items) if it[0] < 0]
+            data = [it for it in items if it[0] >= 0]
             q.clear()
-            q.append(items[-1])
+            q.extend(events)
+            if data:
+                q.append(data[-1])
         else:
             q.extend(items)
             over = len(q) - self.queue_size
@@ -47,6 +51,9 @@ class Client:
         self.wake.set()
 
     async def _send(self, seq: int, text: str) -> None:
+        if seq < 0:  # an event (alarm), outside the numbered history
+            await self.ws.send({"type": "websocket.send", "text": text})
+            return
         if seq <= self.last_sent:
             return
         await self.ws.send({"type": "websocket.send", "text": text})
@@ -92,6 +99,10 @@ class Hub:
         loop = self.loop
         if loop is not None and items and not loop.is_closed():
             loop.call_soon_threadsafe(self._dispatch, items)
+
+    def publish_event_threadsafe(self, text: str) -> None:
+        """Push one un-numbered message (e.g. an alarm) to every client; not in the history."""
+        self.publish_threadsafe([(-1, text)])
 
     def _dispatch(self, items: list[tuple[int, str]]) -> None:
         self.last_publish_mono = time.monotonic()
