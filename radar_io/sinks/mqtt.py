@@ -230,8 +230,10 @@ class MqttPublisher:
     # -- paho's network thread ----------------------------------------------------------------
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any) -> None:
         if getattr(reason, "is_failure", False):
-            self.last_error = f"broker refused the connection: {reason}"
-            log.warning("%s: %s", self.url, self.last_error)
+            err = f"broker refused the connection: {reason}"
+            if err != self.last_error:  # paho retries every ≤ 2 s: log a change only
+                log.warning("%s: %s", self.url, err)
+            self.last_error = err
             return
         self._connects += 1
         if self._connects > 1:
