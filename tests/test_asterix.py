@@ -190,3 +190,33 @@ def test_file_writer_appears_only_when_complete(tmp_path):
     assert (got["sic"] == 4).all() and [p.name for p in tmp_path.iterdir()] == ["run.ast"]
     with pytest.raises(ConfigError, match="cannot write"):
         AsterixFileWriter(str(tmp_path / "no" / "x.ast")).open()
+
+
+def _site_toml(tmp_path, sac: int) -> str:
+    text = (ROOT / "firmware_specs" / "sites" / "demo.toml").read_text()
+    text = "\n".join(line for line in text.splitlines() if not line.startswith("[asterix]")
+                     and not line.startswith(("sac", "sic")))
+    p = tmp_path / f"site{sac}.toml"
+    p.write_text(text + f"\n\n[asterix]\nsac = {sac}\nsic = 17\n")
+    return str(p)
+
+
+def test_site_sac_sic_reach_the_records_and_sac_over_255_is_one_line(tmp_path):
+    sim = RadarSimulator(FlightScript(), SimConfig(seed=2))
+    raw = tmp_path / "capture.bin"
+    raw.write_bytes(sim.generate(3000)[0])
+    site = load_site(_site_toml(tmp_path, 42))
+    assert (getattr(site, "asterix_sac", None), getattr(site, "asterix_sic", None)) == (42, 17)
+    from radar_io.decoding.decoders import iter_decode
+
+    out = tmp_path / "out.ast"
+    sink = open_sink("ast", str(out), site=site)     # what `decode -o OUT.ast` opens
+    for batch in iter_decode([raw.read_bytes()], site=site):
+        sink.write(batch)
+    sink.close()
+    got = decode_records(out.read_bytes())
+    assert len(got["sac"]) > 0 and (got["sac"] == 42).all() and (got["sic"] == 17).all()
+    res = run_cli("decode", str(raw), "--site", _site_toml(tmp_path, 300), "-o",
+                  str(tmp_path / "x.csv"))
+    err = res.stderr.decode().strip()
+    assert res.returncode == 2 and "\n" not in err and "sac" in err and "300" in err, err

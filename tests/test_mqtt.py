@@ -48,8 +48,8 @@ def wait_for(cond, timeout_s: float, step_s: float = 0.02) -> bool:
 class Broker:
     """A Mosquitto broker on 127.0.0.1 and a free port; restartable on the same port."""
 
-    def __init__(self, tmp: Path) -> None:
-        self.tmp = tmp
+    def __init__(self, tmp: Path, extra: str = "allow_anonymous true\n") -> None:
+        self.tmp, self.extra = tmp, extra
         self.port = 0
         self.proc: subprocess.Popen | None = None
 
@@ -60,8 +60,7 @@ class Broker:
                     s.bind(("127.0.0.1", 0))
                     self.port = s.getsockname()[1]
             conf = self.tmp / "mosquitto.conf"
-            conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\n"
-                            "persistence false\n")
+            conf.write_text(f"listener {self.port} 127.0.0.1\n{self.extra}persistence false\n")
             log = open(self.tmp / "mosquitto.log", "ab")
             self.proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=log,
                                          stderr=subprocess.STDOUT)
@@ -297,3 +296,42 @@ def test_registry_sink_publishes_rows(broker):
         sink.close()
         sub.close()
     assert sub.track == [{"msg_seq": 7, "sr_m": 1000.0}, {"msg_seq": 8, "sr_m": None}]
+
+
+def test_mqtts_with_user_and_password_from_the_environment(tmp_path, monkeypatch, caplog):
+    openssl, passwd = shutil.which("openssl"), shutil.which("mosquitto_passwd")
+    if not openssl or not passwd:
+        pytest.skip("openssl / mosquitto_passwd (Debian packages openssl, mosquitto) missing")
+    cert, key, pwfile = tmp_path / "cert.pem", tmp_path / "key.pem", tmp_path / "passwd"
+    subprocess.run([openssl, "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+                    "-keyout", str(key), "-out", str(cert), "-subj", "/CN=127.0.0.1",
+                    "-addext", "subjectAltName=IP:127.0.0.1"], check=True, capture_output=True)
+    subprocess.run([passwd, "-b", "-c", str(pwfile), "site-a", "s3cret-pw"], check=True,
+                   capture_output=True)
+    # started as root, mosquitto would drop to its own user, who cannot read pytest's tmp dir
+    as_root = "user root\n" if os.geteuid() == 0 else ""
+    b = Broker(tmp_path, f"{as_root}certfile {cert}\nkeyfile {key}\npassword_file {pwfile}\n"
+                         "allow_anonymous false\n")
+    b.start()
+    good = bad = None
+    try:
+        monkeypatch.setenv("RADAR_IO_MQTT_USER", "site-a")
+        monkeypatch.setenv("RADAR_IO_MQTT_PASSWORD", "s3cret-pw")
+        good = MqttPublisher(f"mqtts://127.0.0.1:{b.port}/range/site-a", ca_file=str(cert),
+                             status_period_s=0.2)
+        good.start()
+        assert wait_for(lambda: good.connected, 15)
+        good.submit([(1, '{"msg_seq":1}'), (2, '{"msg_seq":2}')])
+        assert wait_for(lambda: good.published == 2, 10)    # acknowledged over TLS
+        monkeypatch.setenv("RADAR_IO_MQTT_PASSWORD", "wrong-pw")
+        bad = MqttPublisher(f"mqtts://127.0.0.1:{b.port}/range/site-a", ca_file=str(cert))
+        bad.start()
+        assert wait_for(lambda: bad.last_error is not None, 15)
+        assert not bad.connected and "refused" in bad.last_error
+    finally:
+        for p in (good, bad):
+            if p is not None:
+                p.close()
+        b.stop()
+    shown = caplog.text + json.dumps(good.stats()) + json.dumps(bad.stats()) + good.url
+    assert "s3cret-pw" not in shown and "wrong-pw" not in shown

@@ -20,6 +20,7 @@ SINKS: dict[str, str] = {
     "da": "radar_io.sinks.uplink:DASink",
     "asterix": "radar_io.sinks.asterix:AsterixSink",
     "mqtt": "radar_io.sinks.mqtt:MqttSink",
+    "ast": "radar_io.sinks.asterix:AsterixFileWriter",   # decode -o OUT.ast (not a table)
 }
 
 

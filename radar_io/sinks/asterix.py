@@ -68,6 +68,8 @@ class AsterixFileWriter(Sink):
         self._out: IO[bytes] | None = None
         self._tmp: str | None = None
         self.bytes = 0
+        #: what decode adds at the end for the table formats; ASTERIX has no place for it
+        self.final_metadata: dict[str, str] = {}
 
     def open(self) -> None:
         if self._out is not None:

@@ -134,8 +134,10 @@ class MqttPublisher:
         self._status_fn, self._sync_fn = status, sync_events
         self._q: deque[list[tuple[int, str]]] = deque()
         self.max_queue = max_queue
-        self._lock = threading.RLock()  # paho may call on_publish inside publish()
-        self._pending: dict[int, int] = {}   # mid → messages in that track payload
+        # never held while calling paho: paho calls on_publish under its own message lock
+        self._lock = threading.Lock()
+        self._pending: dict[int, int] = {}   # mid → track messages in that payload
+        self._early: set[int] = set()        # mids acknowledged before they were registered
         self.connected = False
         self.published = 0        #: track messages acknowledged (QoS 1) / sent (QoS 0)
         self._dropped_full = 0    # queue full (written by the submitting thread only)
@@ -228,8 +230,10 @@ class MqttPublisher:
     # -- paho's network thread ----------------------------------------------------------------
     def _on_connect(self, client: Any, _u: Any, _f: Any, reason: Any, _p: Any) -> None:
         if getattr(reason, "is_failure", False):
-            self.last_error = f"broker refused the connection: {reason}"
-            log.warning("%s: %s", self.url, self.last_error)
+            err = f"broker refused the connection: {reason}"
+            if err != self.last_error:  # paho retries every ≤ 2 s: log a change only
+                log.warning("%s: %s", self.url, err)
+            self.last_error = err
             return
         self._connects += 1
         if self._connects > 1:
@@ -248,8 +252,11 @@ class MqttPublisher:
 
     def _on_publish(self, _c: Any, _u: Any, mid: int, _r: Any, _p: Any) -> None:
         with self._lock:
-            n = self._pending.pop(mid, 0)
-            self.published += n
+            n = self._pending.pop(mid, None)
+            if n is None:
+                self._early.add(mid)   # publish() has not returned to our thread yet
+            else:
+                self.published += n
 
     # -- the publisher thread ------------------------------------------------------------------
     def _run(self) -> None:
@@ -280,8 +287,10 @@ class MqttPublisher:
         if buf:
             self._publish_track(buf)
 
-    def _publish(self, topic: str, payload: str, *, retain: bool = False) -> Any:
-        """paho publish; None (and last_error) when not connected or refused."""
+    def _publish(self, topic: str, payload: str, *, messages: int = 0,
+                 retain: bool = False) -> Any:
+        """paho publish of a payload holding ``messages`` track messages; None (and
+        last_error) when not connected or refused."""
         import paho.mqtt.client as mqtt
 
         c = self._client
@@ -295,16 +304,20 @@ class MqttPublisher:
         if info.rc != mqtt.MQTT_ERR_SUCCESS:
             self.last_error = f"publish to {topic} failed: {mqtt.error_string(info.rc)}"
             return None
+        with self._lock:
+            if info.mid in self._early:   # acknowledged already
+                self._early.discard(info.mid)
+                self.published += messages
+            else:
+                self._pending[info.mid] = messages
         return info
 
     def _publish_track(self, buf: list[tuple[int, str]]) -> None:
         payload = "[" + ",".join(text for _, text in buf) + "]"
-        with self._lock:  # register the mid before paho's thread can acknowledge it
-            info = self._publish(self.target.topic("track"), payload)
-            if info is None:
+        if self._publish(self.target.topic("track"), payload, messages=len(buf)) is None:
+            with self._lock:
                 self._dropped_away += len(buf)
-                return
-            self._pending[info.mid] = len(buf)
+            return
         self.last_msg_seq = buf[-1][0]
 
     def _publish_status(self) -> None:
