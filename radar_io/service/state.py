@@ -59,7 +59,10 @@ class ServiceState:
         self.hub = Hub(self.history, cfg.ws_queue_size, cfg.ws_max_clients,
                        cfg.ws_batch_interval_s)
         self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
-                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s)
+                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s,
+                                 retry_s=cfg.retry_s,  # storage: retry after a disk error
+                                 low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
+        self.runway_jobs: Any = None  # storage: RunwayJobs, created by the runway router
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
@@ -117,6 +120,8 @@ class ServiceState:
         """Stop the reader, close the recording, stop the sinks and the air-data reader."""
         self.acq.stop()
         self.recorder.close()
+        if self.runway_jobs is not None:  # storage: cancel runway jobs, remove their spool
+            self.runway_jobs.close()
         for w in self.sinks.values():
             w.close()
         if self.air is not None:
@@ -157,6 +162,7 @@ class ServiceState:
         st = self.acq.status()
         st.update(self.hub.stats())
         st["recording"] = self.recorder.current
+        st["storage"] = self.recorder.storage()  # storage: free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.acq.calibration.id
         st["control_enabled"] = self.token is not None
