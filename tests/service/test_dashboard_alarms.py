@@ -82,6 +82,8 @@ def test_banner_shows_acknowledges_and_clears(tmp_path, browser):  # noqa: F811
 
 def test_alarm_messages_on_the_websocket(sim_server, browser):  # noqa: F811
     """No /api/alarms route here: no polling, alarms come only from the websocket."""
+    # as a service without an alarm engine: GET /api/alarms answers 404, the page stops polling
+    sim_server.app.state.service.alarms = None
     browser.navigate(sim_server.base + "/")
     browser.wait_for("radarState.connected && radarAlarms.endpoint === false", 10)
     svc = sim_server.app.state.service
