@@ -210,7 +210,7 @@ def test_airdata_adds_the_pressure_altitude_figure(tmp_path):
 @pytest.mark.parametrize("args, needle", [
     (["nope.rdrlog", "-o", "x.html"], "recording not found: nope.rdrlog"),
     (["{flight}", "-o", "x.docx"], "report format must be html or pdf"),
-    (["{flight}", "-o", "x.html", "--site", "atlantis"], "--site atlantis: no such file"),
+    (["{flight}", "-o", "x.html", "--site", "atlantis"], "site 'atlantis': no such file"),
     (["{garbage}", "-o", "x.html"], "no RDR1 frames found"),
 ])
 def test_bad_input_is_one_line(flight, tmp_path, args, needle):

@@ -28,20 +28,6 @@ def add_subparser(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-def resolve_site(name: str) -> str:
-    """A site file path, or a packaged site's name (``demo``) → its file."""
-    if os.path.isfile(name):
-        return name
-    from radar_io.wirespec.frame import spec_dir
-
-    packaged = spec_dir() / "sites" / f"{name}.toml"
-    if os.sep not in name and packaged.is_file():
-        return str(packaged)
-    names = sorted(p.stem for p in (spec_dir() / "sites").glob("*.toml"))
-    raise ConfigError(f"--site {name}: no such file and no packaged site of that name "
-                      f"(packaged: {', '.join(names)})")
-
-
 def run(args: argparse.Namespace) -> int:
     from radar_io.analysis.report import report_format, write_report
     from radar_io.cli.progress import Progress
@@ -55,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"recording not found: {args.recording}")
     if args.airdata and not os.path.isfile(args.airdata):
         raise ConfigError(f"--airdata: CAN log not found: {args.airdata}")
-    site = load_site(resolve_site(args.site)) if args.site else None
+    site = load_site(args.site) if args.site else None
     cal = load_calibration(args.calibration) if args.calibration else None
     ref = load_path(args.path) if args.path else None
     spec = load_spec(args.spec) if args.spec else None
