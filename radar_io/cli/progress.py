@@ -40,14 +40,15 @@ class Progress:
         self._last = now
         el = now - self.t0
         s, u = self.scale, self.unit
+        fmt = "8.0f" if s == 1.0 else "8.1f"
         if self.total:
             pct = 100.0 * done / self.total
             rate = done / el if el > 0 else 0.0
             eta = (self.total - done) / rate if rate > 0 else float("nan")
-            msg = (f"{self.label}: {done * s:8.1f} / {self.total * s:.1f} {u} ({pct:5.1f} %)"
-                   f"  {el:6.1f} s  eta {eta:5.0f} s  {extra}")
+            msg = (f"{self.label}: {done * s:{fmt}} / {self.total * s:.{0 if s == 1.0 else 1}f} {u}"
+                   f" ({pct:5.1f} %)  {el:6.1f} s  eta {eta:5.0f} s  {extra}")
         else:
-            msg = f"{self.label}: {done * s:8.1f} {u}  {el:6.1f} s  {extra}"
+            msg = f"{self.label}: {done * s:{fmt}} {u}  {el:6.1f} s  {extra}"
         self.stream.write("\r" + msg.ljust(100)[:120])
         self.stream.flush()
         self._shown = True
