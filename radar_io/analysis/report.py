@@ -83,7 +83,7 @@ def _fig_plan(d: FlightDigest) -> Any:
     i = decimate_index(d.frames)
     x, y = c["x_m"][i], c["y_m"][i]
     fig, ax = plt.subplots(figsize=(8, 7))
-    ax.plot(y / 1e3, x / 1e3, ".", ms=1.5, color="tab:blue", label="radar track")
+    ax.plot(y / 1e3, x / 1e3, ".", ms=1.5, color="tab:blue", label="radar track", rasterized=True)
     poly = _path_radar_polyline(d)
     rmax = float(np.nanmax(np.hypot(x, y))) if np.isfinite(x).any() else 1000.0
     if poly is not None:
@@ -110,7 +110,7 @@ def _fig_height(d: FlightDigest) -> Any:
     i = decimate_index(d.frames)
     fig, ax = plt.subplots(figsize=(10, 4.5))
     ax.plot(np.hypot(c["x_m"][i], c["y_m"][i]) / 1e3, c["h_m"][i], ".", ms=1.5,
-            label="radar H")
+            label="radar H", rasterized=True)
     poly = _path_radar_polyline(d)
     if poly is not None:
         ax.plot(np.hypot(poly[0], poly[1]) / 1e3, poly[2], "-", color="tab:red", lw=1.2,
@@ -129,9 +129,9 @@ def _fig_deviation(d: FlightDigest) -> Any:
     i = decimate_index(d.frames, 6000)
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     along = c["along_m"][i] / 1e3
-    a1.plot(along, c["dy_m"][i], lw=0.6, color="tab:blue")
+    a1.plot(along, c["dy_m"][i], lw=0.6, color="tab:blue", rasterized=True)
     a1.set_ylabel("DY right of path [m]")
-    a2.plot(along, c["dz_m"][i], lw=0.6, color="tab:green")
+    a2.plot(along, c["dz_m"][i], lw=0.6, color="tab:green", rasterized=True)
     a2.set_ylabel("DZ above path [m]")
     a2.set_xlabel("along-track distance [km]")
     for a in (a1, a2):
@@ -150,9 +150,9 @@ def _fig_angles(d: FlightDigest) -> Any:
     for row, (main, err, unit) in enumerate((("sr_m", "dsr_m", "m"), ("el_deg", "del_deg", "deg"),
                                              ("az_deg", "daz_deg", "deg"))):
         name = main.split("_")[0].upper()
-        axes[row, 0].plot(t, c[main][i], lw=0.7)
+        axes[row, 0].plot(t, c[main][i], lw=0.7, rasterized=True)
         axes[row, 0].set_ylabel(f"{name} [{unit}]")
-        axes[row, 1].plot(t, c[err][i], lw=0.7, color="tab:orange")
+        axes[row, 1].plot(t, c[err][i], lw=0.7, color="tab:orange", rasterized=True)
         axes[row, 1].set_ylabel(f"Δ{name} servo error [{unit}]")
         for a in axes[row]:
             a.grid(alpha=0.3)
