@@ -65,6 +65,20 @@ def test_digest_summary_matches_an_independent_decode(flight):
     assert ev[0]["seq"] == int(b["seq"][i]) and ev[0]["tod_s"] == pytest.approx(float(b["tod_s"][i]))
 
 
+def test_calibration_biases_move_the_track(flight):
+    """--calibration: a +0.05 deg elevation bias raises every valid point by SR·0.05 deg."""
+    from radar_io.analysis.flight_digest import digest_recording
+    from radar_io.decoding.biases import Calibration
+
+    a = digest_recording(flight)
+    b = digest_recording(flight, calibration=Calibration(del_deg=0.05, id="t"))
+    ok = np.isfinite(a.columns["h_m"])
+    sr = a.columns["sr_m"][ok] + a.columns["dsr_m"][ok]
+    dh = b.columns["h_m"][ok] - a.columns["h_m"][ok]
+    assert np.allclose(dh, sr * np.deg2rad(0.05), rtol=0.01)
+    assert b.summary()["frames"] == a.summary()["frames"]
+
+
 def _html_report(flight: Path, tmp: Path) -> Path:
     out = tmp / "report.html"
     r = run_cli("report", str(flight), "--site", "demo", "--path", str(DEMO_PATH), "-o", str(out))
@@ -142,6 +156,8 @@ def test_html_opens_offline_in_chromium_without_console_errors(flight, tmp_path)
         ARTIFACTS.mkdir(parents=True, exist_ok=True)
         c.screenshot(ARTIFACTS / "report_html.png")
         assert (ARTIFACTS / "report_html.png").stat().st_size > 10000
+        c.eval("document.querySelector('figure').scrollIntoView(), true")
+        c.screenshot(ARTIFACTS / "report_html_plan.png")
     finally:
         ch.c.close()
 
