@@ -79,6 +79,32 @@ def test_calibration_biases_move_the_track(flight):
     assert b.summary()["frames"] == a.summary()["frames"]
 
 
+def test_alarm_events_of_the_recording_are_tabled(flight, tmp_path):
+    import shutil
+
+    from radar_io.analysis.flight_digest import digest_recording
+    from radar_io.analysis.report import build_report, render_html
+    from radar_io.service.alarms import AlarmEngine, EventLog, LimitRule
+
+    rec = tmp_path / "x.rdrlog"
+    shutil.copy(flight, rec)
+    # the service's engine and event log, fed 3 samples: raise at SEQ 7, clear at SEQ 9
+    eng = AlarmEngine([LimitRule("hi", "height high", "h_m", None, 610.0)], {},
+                      on_event=EventLog(tmp_path, lambda: "x"))
+    eng.feed([{"h_m": v, "seq": s, "t_ns": 1_800_000_000_000_000_000 + s * 10**6}
+              for v, s in ((600.0, 6), (612.5, 7), (611.0, 8), (605.0, 9))])
+    d = digest_recording(rec)
+    assert [(e["action"], e["seq"]) for e in d.alarm_events] == [("raise", 7), ("clear", 9)]
+    rep = build_report(d)
+    try:
+        text = render_html(rep)
+    finally:
+        rep.close()
+    assert "Alarm events (2)" in text
+    assert "<td>2027-01-15T08:00:00.007Z</td><td>7</td><td>raise</td><td>height high</td>" \
+           "<td>h_m</td><td>612.5</td><td>610</td>" in text
+
+
 def _html_report(flight: Path, tmp: Path) -> Path:
     out = tmp / "report.html"
     r = run_cli("report", str(flight), "--site", "demo", "--path", str(DEMO_PATH), "-o", str(out))

@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,8 @@ class FlightDigest:
     problems: list[str] = field(default_factory=list)
     path: ReferencePath | None = None
     site: Site | None = None
+    #: alarm raise / clear / ack records from ``<recording>.events.jsonl`` (service/alarms.py)
+    alarm_events: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def frames(self) -> int:
@@ -154,7 +157,13 @@ def digest_recording(path: str | os.PathLike[str], *, site: Site | None = None,
     period = float(np.median(steps)) if steps.size else 1e-3
     if not period > 0:
         period = 1e-3
-    return FlightDigest(source=str(path), columns=cols, stats=dict(stats),
+    events: list[dict[str, Any]] = []
+    side = Path(path).with_suffix(".events.jsonl")
+    if side.is_file():
+        from radar_io.service.alarms import read_events
+
+        events = [e for e in read_events(side) if e.get("type") == "alarm"]
+    return FlightDigest(alarm_events=events, source=str(path), columns=cols, stats=dict(stats),
                         counter_t_s=cols["t_s"][np.asarray(c_row, dtype=np.int64)], counter_crc=np.asarray(c_crc),
                         counter_gaps=np.asarray(c_gap), frame_period_s=period, header=header,
                         problems=list(report.problems), path=ref_path, site=site)

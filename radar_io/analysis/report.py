@@ -10,7 +10,8 @@ Figures (matplotlib, Agg backend, decimated to a few thousand points each):
 6. pressure altitude − radar height vs time (needs an airborne CAN log).
 
 Tables: the summary (duration, frames, CRC errors, gaps, GO time, RX GOOD fraction,
-DY / DZ RMS and max |.| per leg) and the sync events with their times.
+DY / DZ RMS and max |.| per leg), the alarm events of the recording's event log
+(``<id>.events.jsonl``, when there is one) and the sync events with their times.
 
 HTML embeds every figure as a base64 PNG (no external file, no script, no CDN);
 PDF is written with :class:`matplotlib.backends.backend_pdf.PdfPages`, one figure
@@ -276,6 +277,22 @@ LEG_HEAD = ("leg", "kind", "along from [m]", "along to [m]", "samples", "DY RMS 
 SYNC_HEAD = ("#", "SEQ", "TOD [s]", "t [s]", "RX GOOD", "SR [m]", "EL [deg]", "AZ [deg]")
 
 
+ALARM_HEAD = ("time (UTC)", "SEQ", "action", "alarm", "column", "value", "limit")
+
+
+def _num_text(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return "" if v is None else str(v)
+
+
+def _alarm_rows(rep: Report) -> list[tuple[str, ...]]:
+    return [(str(e.get("time_utc", "")), _num_text(e.get("seq")), str(e.get("action", "")),
+             str(e.get("name", e.get("id", ""))), str(e.get("column", "")),
+             _num_text(e.get("value")), _num_text(e.get("limit")))
+            for e in rep.digest.alarm_events]
+
+
 def _leg_rows(rep: Report) -> list[tuple[str, ...]]:
     return [(str(g["leg"]), g["kind"], f"{g['along_from_m']:.0f}", f"{g['along_to_m']:.0f}",
              str(g["samples"]), f"{g['dy_rms_m']:.2f}", f"{g['dy_max_abs_m']:.2f}",
@@ -322,6 +339,9 @@ def render_html(rep: Report) -> str:
              _table(None, _summary_rows(rep))]
     if rep.legs:
         parts += ["<h2>Deviation per leg</h2>", _table(LEG_HEAD, _leg_rows(rep))]
+    if rep.digest.alarm_events:
+        parts += [f"<h2>Alarm events ({len(rep.digest.alarm_events)})</h2>",
+                  _table(ALARM_HEAD, _alarm_rows(rep))]
     parts += [f"<h2>Sync events ({len(rep.sync_events)})</h2>",
               _table(SYNC_HEAD, _sync_rows(rep)) if rep.sync_events else "<p>none</p>",
               "<h2>Figures</h2>"]
@@ -360,6 +380,9 @@ def render_pdf(rep: Report, out: Any) -> int:
         _table_pages(pdf, "Summary", None, _summary_rows(rep))
         if rep.legs:
             _table_pages(pdf, "Deviation per leg", LEG_HEAD, _leg_rows(rep))
+        if rep.digest.alarm_events:
+            _table_pages(pdf, f"Alarm events ({len(rep.digest.alarm_events)})", ALARM_HEAD,
+                         _alarm_rows(rep))
         _table_pages(pdf, f"Sync events ({len(rep.sync_events)})", SYNC_HEAD, _sync_rows(rep))
         for _title, fig in rep.figures:
             pdf.savefig(fig)

@@ -130,7 +130,9 @@ def parse_alarm_config(entries: Iterable[dict[str, Any]], source: str = "config"
 
 
 def _iso(t_s: float) -> str:
-    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(t_s)) + f".{int(t_s % 1 * 1000):03d}Z"
+    """UTC ISO 8601 with milliseconds (rounded to the nearest ms)."""
+    sec, ms = divmod(round(t_s * 1000), 1000)
+    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{ms:03d}Z"
 
 
 class AlarmEngine:
