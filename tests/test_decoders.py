@@ -282,3 +282,27 @@ def test_iter_decode_takes_bytes_paths_files_and_chunk_iterables(tmp_path, golde
         for col in want.columns:
             got = np.concatenate([b[col] for b in batches])
             assert np.array_equal(got, want[col], equal_nan=got.dtype.kind == "f"), col
+
+
+def test_bench_measures_a_fresh_process_with_anchors_from_the_same_run():
+    """`radar-io bench --json`: fresh-child figures and anchors that agree with each other."""
+    import json as _json
+
+    from conftest import run_cli
+
+    r = run_cli("bench", "--json", "--frames", "20000", "--repeat", "1", "--core-only")
+    assert r.returncode == 0, r.stderr
+    res = _json.loads(r.stdout)
+    c, d = res["clean"], res["damaged_1pct"]
+    # the clean stream: every frame accepted, by the decoder and by the plain-Python reference
+    assert c["frames_in"] == c["frames_accepted"] == c["reference_frames_ok"] == 20000
+    assert c["stats"]["crc_errors"] == 0 and c["bytes"] == 24 * 20000
+    # the damaged stream (bytes XORed, alignment kept) loses the same frames in both
+    assert d["stats"]["crc_errors"] > 0
+    assert d["reference_frames_ok"] == d["frames_accepted"] < 0.95 * 20000
+    for x in (c, d):
+        assert x["first_call_vs_reference"] == x["reference_s"] / x["first_call_s"]
+        assert x["best_vs_reference"] == x["reference_s"] / x["best_of_n_s"]
+        # a fresh child: its own peak, not the parent's (which holds both streams)
+        assert x["rss_before_mib"] <= x["peak_rss_mib"]
+    assert res["batch_damaged_1pct_accepted"] == d["frames_accepted"]

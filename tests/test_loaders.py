@@ -338,3 +338,35 @@ if __name__ == "__main__":
     with tempfile.TemporaryDirectory() as t:
         DOC.write_text(render_doc(Path(t)), encoding="utf-8")
     print(f"wrote {DOC}")
+
+
+# ---------------------------------------------------------------- hermetic test harness
+def test_tests_read_nothing_beside_the_repository():
+    """No test refers to the shared folder next to the clone (its data is in tests/data/)."""
+    import re
+
+    bad = re.compile(r"""["'/]shared["'/]|\.\./shared|parent\s*/\s*["']shared""")
+    hits = [f"{p.relative_to(ROOT)}:{i}" for p in (ROOT / "tests").rglob("*.py")
+            for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+            if bad.search(line) and "bad = re.compile" not in line]
+    assert not hits, hits
+
+
+@pytest.mark.parametrize("ci, rc", [("", 0), ("true", 1)])
+def test_a_skip_fails_the_session_only_in_ci(tmp_path, ci, rc):
+    """tests/conftest.py: require_program skips with the reason; with CI=true that fails the run."""
+    import os
+    import shutil
+    import subprocess
+
+    shutil.copy(ROOT / "tests" / "conftest.py", tmp_path / "conftest.py")
+    (tmp_path / "test_needs.py").write_text(
+        "from conftest import require_program\n\n"
+        "def test_needs_a_program():\n    require_program('radar-io-no-such-program')\n")
+    env = {**os.environ, "CI": ci}
+    r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rs",
+                        str(tmp_path)], capture_output=True, text=True, cwd=tmp_path, env=env,
+                       timeout=120)
+    assert r.returncode == rc, r.stdout + r.stderr
+    assert "radar-io-no-such-program is not installed" in r.stdout
+    assert ("skipped, which CI does not allow" in r.stdout) == bool(ci)

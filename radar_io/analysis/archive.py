@@ -135,8 +135,8 @@ def archive_recording(path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     writer.open()
     stats: dict[str, int] = {}
     try:
-        for batch in iter_decode(iter_payloads(src, report=report), spec=spec,
-                                 calibration=calibration, site=site_obj):
+        chunks = iter_payloads(src, chunk_bytes=1 << 20, report=report)
+        for batch in iter_decode(chunks, spec=spec, calibration=calibration, site=site_obj):
             if reference_path is not None:
                 batch = add_deviation(batch, reference_path)
             writer.write(batch)

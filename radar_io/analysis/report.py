@@ -180,9 +180,13 @@ def _fig_link(d: FlightDigest) -> Any:
     a1.legend(fontsize=8, loc="upper left")
     a1.grid(alpha=0.3)
     a1.set_title("Link health: CRC errors and SEQ gaps")
-    a2.step(c["t_s"][i], c["go"][i] + 1.2, where="post", label="GO (offset 1.2)")
-    a2.step(c["t_s"][i], c["rx_good"][i], where="post", label="RX GOOD")
-    a2.set_yticks([0, 1, 1.2, 2.2], ["0", "1", "0", "1"])
+    # flags reduced by block minimum: a dropout shorter than the plotting step still shows
+    step = i[1] - i[0] if i.size > 1 else 1
+    go, good = (np.minimum.reduceat(c[k].astype(np.int8), i) for k in ("go", "rx_good"))
+    a2.step(c["t_s"][i], go + 1.5, where="post", label="GO (upper)")
+    a2.step(c["t_s"][i], good, where="post", label="RX GOOD (lower)")
+    a2.set_yticks([0, 1, 1.5, 2.5], ["0", "1", "0", "1"])
+    a2.set_title(f"GO and RX GOOD (minimum over {step} frames)", fontsize=9)
     a2.set_xlabel("time from first frame [s]")
     a2.legend(fontsize=8, loc="center right")
     a2.grid(alpha=0.3)

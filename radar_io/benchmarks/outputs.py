@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 
-def _run_child(args: list[str]) -> tuple[float, float]:
-    """Run ``python args…``; (wall seconds, peak RSS in MB). Raises if the child fails."""
+def _run_child(args: list[str]) -> tuple[float, float, float]:
+    """Run ``python args…``; (wall s, CPU s = user + system, peak RSS MB). Raises if it fails."""
     t0 = time.perf_counter()
     p = subprocess.Popen([sys.executable, *args], stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE)
@@ -44,12 +44,13 @@ def _run_child(args: list[str]) -> tuple[float, float]:
         p.stderr.close()
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(args)} failed ({p.returncode}): {err.strip()}")
-    return wall, usage.ru_maxrss / 1024.0
+    return wall, usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024.0
 
 
-def _best(args: list[str], repeat: int) -> tuple[float, float]:
+def _best(args: list[str], repeat: int) -> tuple[float, float, float]:
+    """Best wall and best CPU time of ``repeat`` runs, and the largest peak RSS."""
     runs = [_run_child(args) for _ in range(repeat)]
-    return min(r[0] for r in runs), max(r[1] for r in runs)
+    return min(r[0] for r in runs), min(r[1] for r in runs), max(r[2] for r in runs)
 
 
 def anchor(fmt: str, src: str, out: str) -> None:
@@ -108,12 +109,13 @@ def run(hours: float = 1.0, long_hours: float = 10.0, repeat: int = 2,
         me = "radar_io.benchmarks.outputs"
         for fmt in ("parquet", "csv"):
             out = tmp / f"cli.{fmt}"
-            res[f"cli_{fmt}_s"], res[f"cli_{fmt}_rss_mb"] = _best(
+            res[f"cli_{fmt}_s"], res[f"cli_{fmt}_cpu_s"], res[f"cli_{fmt}_rss_mb"] = _best(
                 ["-m", "radar_io.cli", "decode", str(rec), "-o", str(out), "-q"], repeat)
             res[f"{fmt}_mb"] = out.stat().st_size / 1e6
-            res[f"anchor_{fmt}_s"], res[f"anchor_{fmt}_rss_mb"] = _best(
-                ["-m", me, "--anchor", fmt, str(rec), str(tmp / f"anchor.{fmt}")], repeat)
+            res[f"anchor_{fmt}_s"], res[f"anchor_{fmt}_cpu_s"], res[f"anchor_{fmt}_rss_mb"] = \
+                _best(["-m", me, "--anchor", fmt, str(rec), str(tmp / f"anchor.{fmt}")], repeat)
             res[f"ratio_{fmt}"] = res[f"cli_{fmt}_s"] / res[f"anchor_{fmt}_s"]
+            res[f"ratio_{fmt}_cpu"] = res[f"cli_{fmt}_cpu_s"] / res[f"anchor_{fmt}_cpu_s"]
             for p in (out, tmp / f"anchor.{fmt}"):
                 p.unlink(missing_ok=True)
         if long_hours > 0:
@@ -122,7 +124,8 @@ def run(hours: float = 1.0, long_hours: float = 10.0, repeat: int = 2,
             repeat_recording(rec, big, times)
             res["long_hours"] = hours * times
             res["long_recording_mb"] = big.stat().st_size / 1e6
-            res["cli_long_parquet_s"], res["cli_long_parquet_rss_mb"] = _run_child(
+            res["cli_long_parquet_s"], res["cli_long_parquet_cpu_s"], \
+                res["cli_long_parquet_rss_mb"] = _run_child(
                 ["-m", "radar_io.cli", "decode", str(big), "-o", str(tmp / "long.parquet"),
                  "-q"])
             big.unlink()
@@ -135,15 +138,18 @@ def run(hours: float = 1.0, long_hours: float = 10.0, repeat: int = 2,
 
 def report(res: dict[str, Any]) -> str:
     lines = [f"recording: {res['hours']} h at 1 kHz, {res['recording_mb']:.0f} MB "
-             f"(best of {res['repeat']}, fresh process each, wall time)"]
+             f"(best of {res['repeat']}, fresh process each; wall and CPU = user + sys)"]
     for fmt in ("parquet", "csv"):
-        lines.append(f"  {fmt:8s} CLI {res[f'cli_{fmt}_s']:6.2f} s  RSS "
-                     f"{res[f'cli_{fmt}_rss_mb']:5.0f} MB | anchor {res[f'anchor_{fmt}_s']:6.2f} s"
-                     f"  RSS {res[f'anchor_{fmt}_rss_mb']:5.0f} MB | ratio "
-                     f"{res[f'ratio_{fmt}']:.2f}x (goal <= 1.5x)")
+        lines.append(
+            f"  {fmt:8s} CLI {res[f'cli_{fmt}_s']:6.2f} s wall {res[f'cli_{fmt}_cpu_s']:6.2f} s CPU "
+            f"RSS {res[f'cli_{fmt}_rss_mb']:4.0f} MB | anchor {res[f'anchor_{fmt}_s']:6.2f} s wall "
+            f"{res[f'anchor_{fmt}_cpu_s']:6.2f} s CPU RSS {res[f'anchor_{fmt}_rss_mb']:4.0f} MB | "
+            f"ratio {res[f'ratio_{fmt}']:.2f}x wall, {res[f'ratio_{fmt}_cpu']:.2f}x CPU "
+            f"(goal <= 1.5x)")
     if "long_hours" in res:
         lines.append(f"  {res['long_hours']:.0f} h ({res['long_recording_mb']:.0f} MB) -> parquet: "
-                     f"{res['cli_long_parquet_s']:.1f} s, peak RSS "
+                     f"{res['cli_long_parquet_s']:.1f} s wall, "
+                     f"{res['cli_long_parquet_cpu_s']:.1f} s CPU, peak RSS "
                      f"{res['cli_long_parquet_rss_mb']:.0f} MB (goal <= 256 MB)")
     return "\n".join(lines)
 

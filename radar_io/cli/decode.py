@@ -11,6 +11,10 @@ from typing import Any
 from radar_io.cli.common import add_common, load_common
 from radar_io.errors import ConfigError
 
+#: bytes read and decoded at a time (~44 k frames): memory does not grow with the input
+CHUNK_BYTES = 1 << 20
+
+
 def add_subparser(sub: Any) -> None:
     p = sub.add_parser("decode", help="decode a raw capture or .rdrlog to CSV, JSON lines, "
                        "Parquet or Arrow",
@@ -53,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
         stdin = sys.stdin.buffer
         chunks = iter(lambda: stdin.read1(1 << 20), b"")
     else:
-        chunks = iter_payloads(args.input, progress=lambda d, t: _progress(progress, d, t, state),
+        chunks = iter_payloads(args.input, chunk_bytes=CHUNK_BYTES,
+                               progress=lambda d, t: _progress(progress, d, t, state),
                                report=report)
     writer = open_table(args.output or "-", args.format, metadata=meta)
     stats: dict[str, int] = {}

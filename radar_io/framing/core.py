@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.wirespec.crc import crc_function, word_table
+from radar_io.wirespec.crc import crc_function, position_tables
 from radar_io.wirespec.frame import CrcSpec, FrameSpec, load_spec
 
 
@@ -211,23 +211,20 @@ class FrameValidator:
     def __init__(self, spec: Any) -> None:
         self.format = fmt = FrameFormat.of(spec)
         self.nwords = fmt.length // 2
-        self._table = word_table(fmt.crc.poly)
-        # register after the sync word, which every candidate starts with
-        self._reg0 = int(self._table[fmt.crc.init ^ fmt.sync_word])
         self._crc_word = fmt.crc.offset // 2
-        self._xor_out = fmt.crc.xor_out
+        # CRC-16 of a fixed-length frame is affine in its words: one table per word position
+        self._c0, self._tables = position_tables(fmt.crc.poly, fmt.crc.init, fmt.crc.xor_out,
+                                                 fmt.sync_word, self._crc_word)
         self._checks = [(c.offset, c.size, c.unused_mask, c.max_raw) for c in fmt.checks]
 
     def crc_ok(self, w: np.ndarray) -> np.ndarray:
         """CRC check of frames (N, L/2) native uint16 words whose first word is the sync."""
-        t = self._table
-        reg = np.full(w.shape[0], self._reg0, dtype=np.uint16)
-        for k in range(1, self._crc_word):
-            np.bitwise_xor(reg, w[:, k], out=reg)
-            t.take(reg, out=reg, mode="clip")
-        if self._xor_out:
-            reg ^= np.uint16(self._xor_out)
-        return reg == w[:, self._crc_word]
+        acc = np.full(w.shape[0], self._c0, dtype=np.uint16)
+        tmp = np.empty(w.shape[0], dtype=np.uint16)
+        for k, t in enumerate(self._tables, start=1):
+            t.take(w[:, k], out=tmp, mode="clip")
+            acc ^= tmp
+        return acc == w[:, self._crc_word]
 
     def plausible(self, w: np.ndarray) -> np.ndarray:
         ok = np.ones(w.shape[0], dtype=bool)
@@ -318,7 +315,8 @@ class BatchFramer:
         while pos <= last:
             if b[pos] == hi and b[pos + 1] == lo:  # fast path: frames back to back from pos
                 m = min((n - pos) // L, self._block)
-                w = b[pos:pos + m * L].view(">u2").reshape(m, L // 2).astype(np.uint16)
+                # native words in Fortran order: each word position (column) is contiguous
+                w = b[pos:pos + m * L].view(">u2").reshape(m, L // 2).astype(np.uint16, order="F")
                 good = (w[:, 0] == self._sync) & val.crc_ok(w) & val.plausible(w)
                 k = m if good.all() else int(np.argmin(good))
                 self._block = (min(2 * self._block, self.BLOCK_FRAMES) if k == m
@@ -350,7 +348,7 @@ class BatchFramer:
         if cand.size == 0:
             st.bytes_discarded += limit - pos
             return limit
-        w = rows[cand].astype(np.uint16)
+        w = rows[cand].astype(np.uint16, order="F")
         crc = self.validator.crc_ok(w)
         plaus = self.validator.plausible(w)
         valid = crc & plaus

@@ -333,6 +333,20 @@ class RecordingReader:
         return len(payload) == length and _chunk_crc(t_ns, payload) == crc
 
 
+def iter_prefix(path: str | os.PathLike[str], size: int, piece: int = 1 << 20) -> Iterator[bytes]:
+    """The first ``size`` bytes of a file, in pieces: a snapshot of a recording still being
+    written (``size`` = :attr:`RecordingWriter.committed_bytes` at request time), so a
+    download's body always matches its Content-Length and is a prefix of the final file."""
+    with open(path, "rb") as f:
+        left = size
+        while left > 0:
+            b = f.read(min(piece, left))
+            if not b:
+                raise StorageError(f"{path}: shorter than its {size}-byte snapshot")
+            left -= len(b)
+            yield b
+
+
 def iter_payloads(path: str | os.PathLike[str], chunk_bytes: int = 1 << 22,
                   progress: Callable[[int, int], None] | None = None,
                   report: ReadReport | None = None) -> Iterator[bytes]:

@@ -14,6 +14,7 @@ space with a low-space warning below ``low_space_bytes``.
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
 import os
@@ -31,6 +32,8 @@ from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.wirespec.frame import FrameSpec
 
 AUTO_MODES = ("go", "manual", "always")
+#: errno values that mean "no room": HTTP 507 (other disk errors: 503)
+NO_SPACE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG})  # EFBIG: size limit
 LOW_SPACE_BYTES = 1 << 30  #: default low-space warning threshold (1 GiB)
 
 log = logging.getLogger("radar_io.recording")
@@ -82,6 +85,7 @@ class Recorder:
         self.storage_errors = 0
         self._want: str | None = None             #: automatic recording wanted ("go"/"always")
         self._next_try = 0.0                      #: monotonic time of the next automatic retry
+        self._retry = False                       #: an automatic recording failed: retry it
         if auto == "always":
             self._want = "always"
             self._try_auto()
@@ -108,7 +112,7 @@ class Recorder:
                 except RadarIOError as exc:
                     self._fail(exc)
                 return
-            if self._want is None or time.monotonic() < self._next_try:
+            if not self._retry or self._want is None or time.monotonic() < self._next_try:
                 return
         self._try_auto()
 
@@ -130,6 +134,7 @@ class Recorder:
             self.storage_error = str(exc)
             self.storage_errors += 1
         self._next_try = time.monotonic() + self.retry_s
+        self._retry = self._want is not None
         log.error("recording: %s", exc)
 
     def _try_auto(self) -> None:
@@ -206,6 +211,7 @@ class Recorder:
                     raise
                 self._writer = writer
                 self.last_error = None
+                self._retry = False
                 log.info("recording %s started (%s)", path.name, reason)
             if reason == "manual":
                 self._manual = True  # a GO fall no longer ends it
@@ -216,8 +222,8 @@ class Recorder:
         in ``last_error`` (the file stays, as complete as the disk allowed)."""
         with self._lock:
             self._manual = False
-            if self._want == "always":
-                self._want = None  # an operator's stop wins until resume_live
+            self._want = None  # an operator's stop (or GO falling) wins: no automatic restart
+            self._retry = False
             w, self._writer = self._writer, None
             if w is None:
                 return None
@@ -234,6 +240,11 @@ class Recorder:
         if w is None or w.path.stem != rec_id:
             return None
         return w.committed_bytes
+
+    @staticmethod
+    def http_status(exc: StorageError) -> int:
+        """507 when the disk has no room (ENOSPC, EDQUOT, EFBIG), else 503."""
+        return 507 if exc.errno in NO_SPACE_ERRNOS else 503
 
     def storage(self) -> dict[str, Any]:
         """Free space of the recordings directory and the last disk error."""
@@ -253,7 +264,6 @@ class Recorder:
             self._pre_bytes = 0
         if self.auto == "always":
             self._want = "always"
-            self._next_try = 0.0
             self._try_auto()
 
     @property

@@ -150,6 +150,7 @@ class AlarmEngine:
         self._out_since: dict[str, float] = {}      # rule id → first out-of-limit time
         self._crc: deque[tuple[float, int]] = deque()
         self.last_seq: int | None = None
+        self._first_check: float | None = None
         self.events: deque[dict[str, Any]] = deque(maxlen=1000)  #: recent raise/clear/ack records
 
     # ------------------------------------------------------------------ inputs
@@ -181,10 +182,11 @@ class AlarmEngine:
             lim = self.builtin
             if lim.get("source_stale") is not None:
                 age = status.get("last_frame_age_s")
-                if status.get("mode", "live") == "live":
-                    val = float(age) if age is not None else math.inf
-                    if status.get("connected") is False:
-                        val = math.inf
+                if status.get("mode", "live") == "live" and "last_frame_age_s" in status:
+                    if self._first_check is None:
+                        self._first_check = now
+                    # no frame yet: stale once the engine has waited stale_s for the first
+                    val = float(age) if age is not None else now - self._first_check
                     changed |= self._judge("source_stale", BUILTIN_NAMES["source_stale"],
                                            "last_frame_age_s", val, now, hi=lim["source_stale"])
             if lim.get("crc_rate") is not None and status.get("crc_errors") is not None:
@@ -354,8 +356,14 @@ def attach_alarms(svc: Any) -> AlarmEngine:
     """An engine for a :class:`~radar_io.service.app.Service`: rules from ``cfg.alarms``,
     fed the decoded messages (an acquisition processor), events to the open recording's
     event log, changes pushed on the websocket. Start :func:`status_loop` in the lifespan."""
-    rules, builtin = parse_alarm_config(getattr(svc.cfg, "alarms", None) or [],
-                                        source=f"config {getattr(svc.cfg, 'config_path', '')}".strip())
+    from radar_io.coordinates.reference_path import DEVIATION_COLUMNS
+    from radar_io.decoding.decoders import output_columns
+
+    columns = [*output_columns(svc.spec, svc.site), "t_ns"]
+    if getattr(svc, "path", None) is not None:
+        columns += DEVIATION_COLUMNS
+    rules, builtin = parse_alarm_config(getattr(svc.cfg, "alarms", None) or [], "config",
+                                        columns)
     publish = getattr(svc.hub, "publish_event_threadsafe", None)
 
     def on_change(alarms: list[dict[str, Any]]) -> None:

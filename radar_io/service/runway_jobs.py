@@ -1,14 +1,15 @@
 """Runway-vision video jobs: one worker thread, a short queue, cancellable, streamed.
 
 ``POST /api/runway`` with a video spools the body to a temporary file and submits a
-:class:`RunwayJob`; the worker decodes the video one frame at a time (never more than
-one frame in memory), runs :class:`~radar_io.vision.chain.RunwayTracker` on it and
-keeps only the per-frame pose dicts. The event loop never runs OpenCV: it only reads
+:class:`RunwayJob`; a worker thread starts a child process that decodes the video one
+frame at a time (never more than one frame in memory), runs
+:class:`~radar_io.vision.chain.RunwayTracker` on it and streams one JSON line per frame
+back; only the per-frame pose dicts are kept. The event loop never runs OpenCV: it only reads
 job states. One job runs at a time (``workers``), ``max_queued`` more may wait; beyond
 that :meth:`RunwayJobs.submit` raises :class:`QueueFull` (HTTP 429).
 
-The worker thread runs at a lower scheduling priority (Linux: per-thread nice 10) with
-OpenCV on one thread, so the radar reader and the event loop keep their cores.
+The child runs at nice 10 with OpenCV on one thread and its own interpreter (no GIL
+shared with the service), so the radar reader and the event loop keep answering.
 """
 
 from __future__ import annotations
@@ -63,37 +64,105 @@ class RunwayJob:
 
 
 def process_video(job: RunwayJob, max_frames: int = MAX_FRAMES) -> None:
-    """Run the tracker over ``job.video`` frame by frame, updating ``job`` as it goes."""
+    """Run the tracker over ``job.video`` in a child process, updating ``job`` as frames come.
+
+    The child (``python -m radar_io.service.runway_jobs VIDEO …``, nice 10) decodes one
+    frame at a time and writes one JSON line per frame; a process of its own keeps OpenCV
+    and the chain's Python code off the service's GIL. Cancelling kills the child.
+    """
+    import json
+    import subprocess
+    import sys
+
+    pkg_root = str(Path(__file__).resolve().parents[2])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [pkg_root] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])}
+    pp = job.principal_point or ("", "")
+    cmd = [sys.executable, "-m", "radar_io.service.runway_jobs", str(job.video), repr(job.focal_px),
+           repr(job.half_width_m), str(pp[0]), str(pp[1]), str(max_frames)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                            preexec_fn=_nice_child if os.name == "posix" else None)
+    killer = threading.Thread(target=_kill_on_cancel, args=(job, proc), daemon=True)
+    killer.start()
+    frames: list[dict[str, Any]] = []
+    error: str | None = None
+    try:
+        assert proc.stdout is not None
+        for line in proc.stdout:
+            doc = json.loads(line)
+            if "frame" in doc:
+                frames.append(doc)
+                job.frames_done = len(frames)
+            elif "frames_total" in doc:
+                job.frames_total = doc["frames_total"]
+            elif "error" in doc:
+                error = doc["error"]
+    finally:
+        proc.stdout.close()  # type: ignore[union-attr]
+        err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+        proc.wait()
+        proc.stderr.close()  # type: ignore[union-attr]
+    if job.cancel.is_set():
+        return
+    if error is not None:
+        raise RadarIOError(error)
+    if proc.returncode != 0:
+        last = err.strip().splitlines()[-1] if err.strip() else f"exit status {proc.returncode}"
+        raise RadarIOError(f"runway worker failed: {last}")
+    if not frames:
+        raise RadarIOError("the video holds no frames")
+    job.frames_total = len(frames)
+    job.result = {"frames": frames, "found": sum(1 for f in frames if f["found"])}
+
+
+def _kill_on_cancel(job: RunwayJob, proc: Any) -> None:
+    while proc.poll() is None:
+        if job.cancel.wait(0.2):
+            proc.kill()
+            return
+
+
+def _nice_child() -> None:
+    os.nice(10)
+
+
+def _worker_main(argv: list[str]) -> int:
+    """The child: one JSON line per frame on stdout (``frames_total`` first, ``error`` on failure)."""
+    import json
+    import sys
+
     import cv2
 
     from radar_io.vision.chain import RunwayTracker
 
-    cap = cv2.VideoCapture(str(job.video))
+    video, focal, half_width, cx, cy, max_frames = argv
+    cv2.setNumThreads(1)
+    out = sys.stdout
+    pp = (float(cx), float(cy)) if cx and cy else None
+    cap = cv2.VideoCapture(video)
     try:
         if not cap.isOpened():
-            raise RadarIOError("cannot decode the video")
+            out.write(json.dumps({"error": "cannot decode the video"}) + "\n")
+            return 0
         n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
-        job.frames_total = min(n, max_frames) if n > 0 else None
-        tracker = RunwayTracker(job.focal_px, job.half_width_m, job.principal_point)
-        frames: list[dict[str, Any]] = []
-        found = 0
-        while len(frames) < max_frames:
-            if job.cancel.is_set():
-                return
-            ok, img = cap.read()
+        limit = int(max_frames)
+        out.write(json.dumps({"frames_total": min(n, limit) if n > 0 else None}) + "\n")
+        out.flush()
+        tracker = RunwayTracker(float(focal), float(half_width), pp)
+        k = 0
+        while k < limit:
+            ok, img = cap.read()  # one frame in memory at a time
             if not ok:
                 break
             gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
-            r = tracker.process(gray).to_dict()
-            found += bool(r["found"])
-            frames.append({"frame": len(frames), **r})
-            job.frames_done = len(frames)
-        if not frames:
-            raise RadarIOError("the video holds no frames")
-        job.frames_total = len(frames)
-        job.result = {"frames": frames, "found": found}
+            out.write(json.dumps({"frame": k, **tracker.process(gray).to_dict()}) + "\n")
+            out.flush()
+            k += 1
+    except RadarIOError as exc:
+        out.write(json.dumps({"error": str(exc)}) + "\n")
     finally:
         cap.release()
+    return 0
 
 
 class RunwayJobs:
@@ -176,13 +245,6 @@ class RunwayJobs:
 
     # -- worker ------------------------------------------------------------------------------
     def _work(self) -> None:
-        _lower_priority()
-        try:
-            import cv2
-
-            cv2.setNumThreads(1)
-        except ImportError:
-            pass
         while True:
             with self._cond:
                 while not self._queue and not self._closed:
@@ -222,9 +284,7 @@ class RunwayJobs:
             del self._jobs[j.id]
 
 
-def _lower_priority() -> None:
-    """Nice 10 for the calling thread (Linux threads are tasks); ignored elsewhere."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 10)
-    except (AttributeError, OSError):
-        pass
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(_worker_main(sys.argv[1:]))

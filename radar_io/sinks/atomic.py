@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from typing import BinaryIO
 
 from radar_io.errors import ConfigError, StorageError
 
@@ -21,7 +20,11 @@ PART_SUFFIX = ".part"
 
 
 class AtomicFile:
-    """A binary file that appears under ``path`` only after :meth:`commit`."""
+    """A file that appears under ``path`` only after :meth:`commit`.
+
+    The temporary file is created empty at :attr:`tmp_path`; the caller writes it (any
+    way: a native Arrow stream, a Python file) and closes its handle before ``commit``.
+    """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
@@ -35,8 +38,8 @@ class AtomicFile:
         except OSError as exc:
             raise ConfigError(f"cannot write {self.path}: {exc.strerror}") from exc
         os.fchmod(fd, 0o644)
+        os.close(fd)
         self.tmp_path = Path(tmp)
-        self.file: BinaryIO = os.fdopen(fd, "wb", buffering=1 << 20)
         self.done = False
 
     def commit(self) -> None:
@@ -44,10 +47,11 @@ class AtomicFile:
         if self.done:
             return
         try:
-            if not self.file.closed:
-                self.file.flush()
-                os.fsync(self.file.fileno())
-                self.file.close()
+            fd = os.open(self.tmp_path, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
             os.replace(self.tmp_path, self.path)
         except OSError as exc:
             self.abort()
@@ -67,10 +71,6 @@ class AtomicFile:
         if self.done:
             return
         self.done = True
-        try:
-            self.file.close()
-        except OSError:
-            pass
         try:
             os.unlink(self.tmp_path)
         except OSError:

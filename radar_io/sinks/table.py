@@ -60,8 +60,12 @@ class TableWriter(Sink):
         else:
             from radar_io.sinks.atomic import AtomicFile
 
+            import pyarrow as pa
+
             self._atomic = AtomicFile(self.target)
-            self._out = self._atomic.file
+            # a native stream: the writers' many small writes never go through Python
+            self._out = pa.BufferedOutputStream(pa.OSFile(str(self._atomic.tmp_path), "wb"),
+                                                buffer_size=1 << 20)
 
     def write(self, batch: Batch) -> int:
         if self._out is None:
@@ -90,6 +94,8 @@ class TableWriter(Sink):
                 self._started = True
             self._finish()
             if self._atomic is not None:
+                assert self._out is not None
+                self._out.close()
                 self._atomic.commit()
             else:
                 assert self._out is not None
@@ -106,6 +112,11 @@ class TableWriter(Sink):
         """Drop the unfinished file (nothing appears under the target name); never raises."""
         self._closed = True
         if self._atomic is not None:
+            try:
+                if self._out is not None:
+                    self._out.close()
+            except Exception:  # noqa: BLE001 - dropping the file anyway
+                pass
             self._atomic.abort()
 
     def __exit__(self, exc_type: object, *exc: object) -> None:

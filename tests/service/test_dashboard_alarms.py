@@ -65,6 +65,7 @@ def test_banner_shows_acknowledges_and_clears(tmp_path, browser):  # noqa: F811
         browser.eval("document.getElementById('token').value = 'nope', true")
         browser.eval(f"{BANNER}.querySelector('button').click(), true")
         browser.wait_for("document.getElementById('msg').textContent === '403: wrong token'", 5)
+        browser.wait_for(f"{BANNER}.textContent.includes('acknowledge failed: 403: wrong token')", 5)
         assert peer.acks == [] and not browser.eval(f"{BANNER}.hidden")
 
         # the control token: acknowledged, the banner goes, the header keeps a quiet note

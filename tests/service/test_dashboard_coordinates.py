@@ -68,7 +68,7 @@ def test_without_a_site_the_route_says_so(tmp_path):
     try:
         with live_server(service_config(tmp_path, source=pty.path)) as srv:
             code, doc = srv.request("POST", ROUTE, {"xr_m": [0.0], "yr_m": [0.0], "hr_m": [0.0]})
-            assert code == 404 and "site" in doc["detail"]
+            assert code == 404 and "no radar site configured" in str(doc["detail"])
     finally:
         pty.close()
 

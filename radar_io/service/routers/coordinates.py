@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field, model_validator
 
 MAX_POINTS = 100_000  #: points accepted in one request
@@ -40,14 +40,15 @@ def runway_to_radar(req: RunwayPoints, request: Request) -> dict[str, Any]:
     import numpy as np
 
     from radar_io.coordinates import transforms
+    from radar_io.errors import NotFoundError, ValidationError
 
     site = request.app.state.service.site
     if site is None:
-        raise HTTPException(404, "no radar site configured (serve --site SITE.toml)")
+        raise NotFoundError("no radar site configured (serve --site SITE.toml)")
     cols = {k: np.asarray(getattr(req, k), dtype=float) for k in ("xr_m", "yr_m", "hr_m")}
     for k, v in cols.items():  # checked here: a 422 echoing NaN in its body is not JSON
         bad = np.flatnonzero(~np.isfinite(v))
         if bad.size:
-            raise HTTPException(422, f"{k}[{bad[0]}] is not a finite number")
+            raise ValidationError(f"{k}[{bad[0]}] is not a finite number")
     x, y, h = transforms.runway_to_radar(cols["xr_m"], cols["yr_m"], cols["hr_m"], site)
     return {"site": site.name, "x_m": x.tolist(), "y_m": y.tolist(), "h_m": h.tolist()}

@@ -6,24 +6,29 @@ from __future__ import annotations
 import io
 from typing import Literal
 
-from fastapi import APIRouter, Query, Request
+from fastapi import APIRouter, Depends, Query
 from fastapi.responses import Response
+
+from radar_io.service.errors import responses
+from radar_io.service.routers.deps import get_state
+from radar_io.service.state import ServiceState
 
 router = APIRouter(tags=["recordings"])
 
 
-@router.get("/api/recordings/{rec_id}/report")
-def report(rec_id: str, request: Request,
-           format: Literal["html", "pdf"] = Query("html")) -> Response:  # noqa: A002
-    """Self-contained HTML (figures embedded) or a PDF; built on request (a few seconds for
+@router.get("/api/recordings/{rec_id}/report",
+            responses={200: {"content": {"text/html": {}, "application/pdf": {}}},
+                       **responses(404, 422)})
+def report(rec_id: str, format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
+           state: ServiceState = Depends(get_state)) -> Response:
+    """Self-contained HTML (figures embedded) or a PDF, built on request (a few seconds for
     a 10-minute recording)."""
     from radar_io.analysis.report import write_report
 
-    svc = request.app.state.service
-    path = svc.recording_path(rec_id)
+    path = state.recording_path(rec_id)
     buf = io.BytesIO()
-    write_report(path, buf, format, site=svc.site, calibration=svc.acq.calibration,
-                 ref_path=svc.path, spec=svc.spec)
+    write_report(path, buf, format, site=state.site, calibration=state.acq.calibration,
+                 ref_path=state.path, spec=state.spec)
     if format == "pdf":
         return Response(buf.getvalue(), media_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="{rec_id}-report.pdf"'})

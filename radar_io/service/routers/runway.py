@@ -14,34 +14,21 @@ from __future__ import annotations
 
 import base64
 import os
-import secrets
 import threading
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
+from radar_io.service.routers.deps import require_token
 from radar_io.service.runway_jobs import MAX_FRAMES, RunwayJobs
 
-MAX_BODY = 512 << 20   #: bytes accepted for one upload (config runway_max_upload_mb)
+MAX_BODY = 512 << 20   #: bytes accepted for one upload (config max_upload_mb)
 
 __all__ = ["MAX_BODY", "MAX_FRAMES", "router"]
-
-
-def _require_token(request: Request, authorization: str | None = Header(None)) -> None:
-    """The service's control token (same rules as every control endpoint)."""
-    svc = request.app.state.service
-    if svc.token is None:
-        raise HTTPException(403, "control is disabled: no token configured (set "
-                            "RADAR_IO_TOKEN or token_file)")
-    if not authorization or not authorization.startswith("Bearer "):
-        raise HTTPException(401, "control needs 'Authorization: Bearer <token>'",
-                            headers={"WWW-Authenticate": "Bearer"})
-    if not secrets.compare_digest(authorization[7:].strip().encode(), svc.token.encode()):
-        raise HTTPException(403, "wrong token")
 
 
 router = APIRouter(tags=["runway vision"])
@@ -49,19 +36,18 @@ _jobs_lock = threading.Lock()
 
 
 def jobs_of(app: Any) -> RunwayJobs:
-    """The app's runway job table, created on first use (config: runway_queue)."""
+    """The service's runway job table, created on first use (config: runway_queue); closed
+    by the service's stop()."""
+    state = app.state.service
     with _jobs_lock:
-        jobs = getattr(app.state, "runway_jobs", None)
-        if jobs is None:
-            cfg = app.state.service.cfg
-            jobs = RunwayJobs(max_queued=int(getattr(cfg, "runway_queue", 2)))
-            app.state.runway_jobs = jobs
-        return jobs
+        if getattr(state, "runway_jobs", None) is None:
+            state.runway_jobs = RunwayJobs(max_queued=int(getattr(state.cfg, "runway_queue", 2)))
+        return state.runway_jobs
 
 
 def _max_body(request: Request) -> int:
-    mb = getattr(request.app.state.service.cfg, "runway_max_upload_mb", None)
-    return int(mb * (1 << 20)) if mb else MAX_BODY
+    mb = getattr(request.app.state.service.cfg, "max_upload_mb", None)
+    return int(mb) << 20 if mb else MAX_BODY
 
 
 async def _spool(request: Request, path: Path, limit: int) -> int:
@@ -158,7 +144,7 @@ def _image_pose(path: Path, focal_px: float, half_width_m: float,
     return out
 
 
-@router.post("/api/runway", dependencies=[Depends(_require_token)], status_code=200,
+@router.post("/api/runway", dependencies=[Depends(require_token)], status_code=200,
              responses={202: {"description": "video accepted as a job"},
                         413: {"description": "upload too large"},
                         429: {"description": "job queue full"}})
@@ -216,7 +202,7 @@ def runway_job(request: Request, job_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
 
 
-@router.delete("/api/runway/jobs/{job_id}", dependencies=[Depends(_require_token)])
+@router.delete("/api/runway/jobs/{job_id}", dependencies=[Depends(require_token)])
 def runway_job_cancel(request: Request, job_id: str) -> dict[str, Any]:
     """Cancel a video job (queued: at once; running: at its next frame)."""
     from radar_io.errors import NotFoundError

@@ -7,7 +7,7 @@ import { $ } from "./state.js";
 import { control } from "./api.js";
 
 export const POLL_S = 1.0;
-const A = (window.radarAlarms = { list: [], endpoint: null, acks: 0 });
+const A = (window.radarAlarms = { list: [], endpoint: null, acks: 0, error: "", shown: null });
 
 const fmtValue = (v) => (typeof v === "number" ? (Math.abs(v) >= 100 ? v.toFixed(1) : v.toPrecision(4)) : String(v ?? "—"));
 const fmtSince = (s) => (typeof s === "number" ? new Date(s * 1000).toISOString().slice(11, 19) + "Z" : String(s ?? ""));
@@ -28,12 +28,22 @@ function row(a) {
   return div;
 }
 
-/** Show this list of active alarms (replaces the previous one). */
+/** Show this list of active alarms (replaces the previous one; the DOM is rebuilt only
+ * when something changed, so an ACK button is not replaced under the operator's click). */
 export function setAlarms(list) {
   A.list = Array.isArray(list) ? list : [];
+  const key = JSON.stringify([A.list, A.error]);
+  if (key === A.shown) return;
+  A.shown = key;
   const open = A.list.filter((a) => !a.acknowledged), acked = A.list.filter((a) => a.acknowledged);
-  const banner = $("alarms");
-  banner.replaceChildren(...open.map(row));
+  const banner = $("alarms"), rows = open.map(row);
+  if (open.length && A.error) {
+    const err = document.createElement("div");
+    err.className = "alarm-error";
+    err.textContent = `acknowledge failed: ${A.error}`;
+    rows.push(err);
+  }
+  banner.replaceChildren(...rows);
   banner.hidden = open.length === 0;
   const quiet = $("alarms-acked");
   quiet.textContent = acked.length ? `acknowledged: ${acked.map((a) => a.name || a.id).join(", ")}` : "";
@@ -43,7 +53,9 @@ export function setAlarms(list) {
 export async function acknowledge(id) {
   const doc = await control(`/api/alarms/${encodeURIComponent(id)}/ack`);
   if (doc !== null) A.acks++;
-  await pollAlarms();
+  A.error = doc === null ? $("msg").textContent : ""; // e.g. "401: control needs …" (no token)
+  if (A.endpoint) await pollAlarms();
+  else setAlarms(A.list);
 }
 
 export async function pollAlarms() {

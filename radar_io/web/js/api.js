@@ -1,12 +1,19 @@
 // HTTP helpers: one error formatter, JSON requests, control requests with the bearer token.
 import { $ } from "./state.js";
 
+// {loc: ["body", "xr_m", 0], msg} → "xr_m.0: msg"; {loc: [], msg} → "msg"
+const item = (e) => {
+  if (!e || e.msg === undefined) return JSON.stringify(e);
+  const loc = (e.loc || []).filter((p, i) => !(i === 0 && ["body", "query", "path", "header"].includes(p)));
+  return loc.length ? `${loc.join(".")}: ${e.msg}` : e.msg;
+};
+
 /** One line for a failed response: "<status>: <detail>" (FastAPI's detail may be a list). */
 export function errorText(status, doc) {
   const d = doc && doc.detail !== undefined ? doc.detail : doc;
   let text;
   if (typeof d === "string") text = d;
-  else if (Array.isArray(d)) text = d.map((e) => (e && e.msg ? `${(e.loc || []).slice(1).join(".")}: ${e.msg}` : JSON.stringify(e))).join("; ");
+  else if (Array.isArray(d)) text = d.map(item).join("; ");
   else text = JSON.stringify(d);
   return `${status}: ${text}`;
 }

@@ -66,7 +66,7 @@ async function manual() {
   if (!RW.img) { $("rw-result").textContent = "load an image first"; return; }
   const body = { points: RW.points, focal_px: Number($("rw-f").value), half_width_m: Number($("rw-d").value), principal_point: principalPoint(RW.width, RW.height) };
   RW.lastManual = body;
-  try { rwShow(await request("/api/runway/manual", { method: "POST", body })); } catch (e) { $("rw-result").textContent = e.message; }
+  try { rwShow(await request("/api/runway/manual", { method: "POST", body, headers: authHeader() })); } catch (e) { $("rw-result").textContent = e.message; }
 }
 
 export function initRunway() {

@@ -1,4 +1,4 @@
-// Strip charts: any numeric column of the live messages against receive time (UTC), chosen
+// Strip charts: any numeric (or null) column of the live messages against receive time (UTC), chosen
 // from a list, several at once, the choice kept in localStorage. Drawn with uPlot (vendored).
 // window.radarStrip for the tests.
 import uPlot from "../vendor/uPlot.esm.js";
@@ -79,7 +79,8 @@ export function removeColumn(column) {
 function updateAvailable(m) {
   let added = false;
   for (const [k, v] of Object.entries(m)) {
-    if (SKIP.has(k) || (typeof v !== "number" && typeof v !== "boolean") || T.available.includes(k)) continue;
+    // numeric columns; null counts (x_m is null while RX is NG, but it is a column)
+    if (SKIP.has(k) || (v !== null && typeof v !== "number" && typeof v !== "boolean") || T.available.includes(k)) continue;
     T.available.push(k); added = true;
   }
   if (!added) return;
