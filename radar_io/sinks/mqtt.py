@@ -128,6 +128,8 @@ class MqttPublisher:
             raise ConfigError("mqtt: batch_s must be in (0, 1] s and status_period_s > 0")
         self._username = username if username is not None else os.environ.get(USER_ENV)
         self._password = password if password is not None else os.environ.get(PASSWORD_ENV)
+        if ca_file is not None and not os.path.isfile(ca_file):
+            raise ConfigError(f"{self.url}: CA file {ca_file} not found")
         self._ca_file, self._client_id = ca_file, client_id
         self.batch_s, self.status_period_s = batch_s, status_period_s
         self.max_batch_messages = max_batch_messages
