@@ -83,6 +83,7 @@ class AsterixFileWriter(Sink):
                                              suffix=".part", dir=directory)
         except OSError as exc:
             raise ConfigError(f"cannot write {self.target}: {exc.strerror}") from exc
+        os.fchmod(fd, 0o644)  # as the table writers (mkstemp makes 0600)
         self._out = os.fdopen(fd, "wb", buffering=1 << 20)
 
     def write(self, batch: Batch) -> int:
