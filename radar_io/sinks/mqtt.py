@@ -305,6 +305,12 @@ class MqttPublisher:
             return None
         if info.rc != mqtt.MQTT_ERR_SUCCESS:
             self.last_error = f"publish to {topic} failed: {mqtt.error_string(info.rc)}"
+            if info.rc == mqtt.MQTT_ERR_NO_CONN and self.target.qos:
+                with self._lock:  # paho keeps it and may still send it: not counted twice
+                    if info.mid in self._early:
+                        self._early.discard(info.mid)
+                    elif len(self._pending) < 100_000:
+                        self._pending[info.mid] = 0
             return None
         with self._lock:
             if info.mid in self._early:   # acknowledged already
