@@ -46,7 +46,16 @@ async function estimate() {
   const q = `focal_px=${$("rw-f").value}&half_width_m=${$("rw-d").value}`;
   let doc;
   try {
-    doc = await request(`/api/runway?${q}`, { method: "POST", body: file, raw: true, headers: { ...authHeader(), "Content-Type": file.type || "application/octet-stream" } });
+    doc = await request(`/api/runway?${q}`, { method: "POST", body: file, raw: true, headers: { "Content-Type": file.type || "application/octet-stream", ...authHeader() } });
+    if (doc.job && doc.status_url) { // a video: a job on the server (202), polled until it ends
+      for (;;) {
+        await new Promise((ok) => setTimeout(ok, 500));
+        const job = await request(doc.status_url);
+        $("rw-result").textContent = `${job.state}: ${job.frames_done} / ${job.frames_total ?? "?"} frames`;
+        if (job.state === "done") { doc = job.result; break; }
+        if (job.state === "failed" || job.state === "cancelled") { $("rw-result").textContent = `${job.state}: ${job.error || ""}`; return; }
+      }
+    }
   } catch (e) { $("rw-result").textContent = e.message; return; }
   if (doc.frames) { RW.result = doc; $("rw-result").textContent = doc.frames.map((r) => `#${r.frame} ` + (r.found ? `bank ${r.bank_deg} pitch ${r.pitch_deg} yaw ${r.yaw_deg} h ${r.height_m} lat ${r.lateral_m} q ${r.quality}` : `not found: ${r.reason}`)).join("\n"); return; }
   if (doc.overlay_png_base64) await rwLoadImage("data:image/png;base64," + doc.overlay_png_base64, doc.image.width, doc.image.height);
