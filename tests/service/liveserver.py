@@ -33,8 +33,9 @@ class LiveServer:
         from radar_io.service.app import create_app
 
         self.app = create_app(cfg)
-        for r in routers:  # test peers for endpoints other branches provide
+        for r in routers:  # test peers: matched first, so they win over the app's own routes
             self.app.include_router(r)
+            self.app.router.routes.insert(0, self.app.router.routes.pop())
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.sock.bind(("127.0.0.1", port))
