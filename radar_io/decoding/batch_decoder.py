@@ -13,8 +13,8 @@ Chunked API:
   nothing); temporaries are per inner step of :attr:`BatchDecoder.BLOCK` frames
   and stay in the CPU cache;
 * :func:`iter_decode` does the same for a stream (bytes, a file, a path or an
-  iterable of byte chunks) and yields :class:`MeasurementBatch` es of exactly
-  ``block_frames`` rows (the last one shorter, possibly empty, carrying the final
+  iterable of byte chunks) and yields :class:`MeasurementBatch` es of at most
+  ``block_frames`` rows (the last one, often empty, carrying the final
   counters) — memory does not grow with the input. The framer's state carries
   across blocks and chunks: no frame is lost or doubled at a boundary.
 """
@@ -257,10 +257,13 @@ def iter_decode(source: Any, *, block_frames: int = BLOCK_FRAMES,
     """Stream ``source`` through the batch framer and decoder in batches of ``block_frames`` rows.
 
     ``source``: bytes-like, a file path, a binary file object, or an iterable of
-    byte chunks (a serial reader, ``recording.rdrlog.iter_payloads``). Every batch
-    holds exactly ``block_frames`` rows except the last, which may be shorter or
-    empty and carries the final counters; ``batch.stats`` is the framer's
-    cumulative counters when the batch was made. Memory is bounded by the block size.
+    byte chunks (a serial reader, stdin, ``recording.rdrlog.iter_payloads``);
+    bytes, paths and files are read ``block_frames`` frames at a time. A batch
+    holds at most ``block_frames`` rows; the frames of a chunk are all yielded
+    before the next chunk is read (a live pipe is never held back). The last
+    batch (often empty) carries the final counters, after the end-of-stream
+    flush; ``batch.stats`` is the framer's cumulative counters when the batch was
+    made. Memory is bounded by the block and chunk sizes.
     """
     spec = spec or (decoder.spec if decoder is not None else load_spec())
     framer = framer or BatchFramer(spec)
@@ -290,7 +293,7 @@ def iter_decode(source: Any, *, block_frames: int = BLOCK_FRAMES,
         blocks = framer.feed_blocks(chunk)
         pending += blocks
         rows += sum(b.shape[0] for b in blocks)
-        while rows >= n:
-            yield take(n)
+        while rows:  # nothing waits for the next chunk: a live pipe stays live
+            yield take(min(n, rows))
     framer.flush()
     yield take(rows)
