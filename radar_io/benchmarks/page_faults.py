@@ -3,6 +3,7 @@
 ``python -m radar_io.benchmarks.page_faults numpy|mmap|populate|huge`` writes 15
 float64 columns of 2 M rows (229 MiB) and prints user / system time and page faults.
 """
+
 from __future__ import annotations
 
 import mmap
@@ -11,22 +12,35 @@ import sys
 
 import numpy as np
 
-mode=sys.argv[1]
-n=2_000_000; ncol=15
-def u():
-    r=resource.getrusage(resource.RUSAGE_SELF); return r.ru_utime, r.ru_stime, r.ru_minflt
-a=u()
-arrs=[]
-for c in range(ncol):
-    nb=n*8
-    if mode=="numpy":
-        x=np.empty(n)
-    else:
-        fl=mmap.MAP_PRIVATE|mmap.MAP_ANONYMOUS|(mmap.MAP_POPULATE if mode=="populate" else 0)
-        m=mmap.mmap(-1, nb, flags=fl)
-        if mode=="huge": m.madvise(mmap.MADV_HUGEPAGE)
-        x=np.frombuffer(m, dtype=np.float64)
-    x.fill(1.0)
-    arrs.append(x)
-b=u()
-print(mode, f"user {b[0]-a[0]:.3f} sys {b[1]-a[1]:.3f} flt {b[2]-a[2]}  ({ncol*n*8/2**20:.0f} MiB)")
+
+def _usage() -> tuple[float, float, int]:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime, r.ru_stime, r.ru_minflt
+
+
+def write_columns(mode: str, rows: int = 2_000_000, columns: int = 15) -> dict[str, float]:
+    """Allocate ``columns`` float64 columns by ``mode`` and write them once; user/sys s, faults."""
+    a = _usage()
+    keep = []
+    for _ in range(columns):
+        if mode == "numpy":
+            x = np.empty(rows)
+        else:
+            flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+            if mode == "populate":
+                flags |= mmap.MAP_POPULATE
+            m = mmap.mmap(-1, rows * 8, flags=flags)
+            if mode == "huge":
+                m.madvise(mmap.MADV_HUGEPAGE)
+            x = np.frombuffer(m, dtype=np.float64)
+        x.fill(1.0)
+        keep.append(x)
+    b = _usage()
+    return {"user_s": b[0] - a[0], "sys_s": b[1] - a[1], "faults": b[2] - a[2],
+            "mib": columns * rows * 8 / 2**20}
+
+
+if __name__ == "__main__":
+    r = write_columns(sys.argv[1] if len(sys.argv) > 1 else "mmap")
+    print(f"{sys.argv[1:2]} user {r['user_s']:.3f} s, sys {r['sys_s']:.3f} s, "
+          f"{r['faults']} faults, {r['mib']:.0f} MiB")
