@@ -188,6 +188,7 @@ def test_file_writer_appears_only_when_complete(tmp_path):
     valid = (batch["rx_good"] == 1) & (batch["go"] == 1)
     assert len(got["sr_m"]) == valid.sum() == w.stats()["records"]
     assert (got["sic"] == 4).all() and [p.name for p in tmp_path.iterdir()] == ["run.ast"]
+    assert out.stat().st_mode & 0o777 == 0o644
     with pytest.raises(ConfigError, match="cannot write"):
         AsterixFileWriter(str(tmp_path / "no" / "x.ast")).open()
 

@@ -149,7 +149,7 @@ class Pipeline:
     def __init__(self, tmp: Path, url: str) -> None:
         spec = load_spec()
         site = load_site(ROOT / "firmware_specs" / "sites" / "demo.toml")
-        self.history = History(200_000)
+        self.history = History(512 << 20)   # bytes: all of a 60 s run
         self.recorder = Recorder(tmp / "data", spec, site, "sim://", auto="manual")
         self.submit_max_s = self.noop_max_s = self.submit_total_s = 0.0
         self.submits = 0
@@ -226,7 +226,7 @@ def test_one_khz_through_the_broker_every_msg_seq_once(broker, tmp_path):
     seqs = sub.seqs()
     assert seqs == list(range(1, last + 1))       # every msg_seq exactly once, in order
     assert last >= 0.5 * 1000 * run_s             # the source really ran near 1 kHz
-    hist = {seq: json.loads(text) for seq, _, text in pipe.history.since(0)}
+    hist = {seq: json.loads(text) for seq, text in pipe.history.since(0)}
     for m in sub.track:                           # values match /api/track (the history)
         assert m == hist[m["msg_seq"]]
     st = pipe.pub.stats()
@@ -335,3 +335,77 @@ def test_mqtts_with_user_and_password_from_the_environment(tmp_path, monkeypatch
         b.stop()
     shown = caplog.text + json.dumps(good.stats()) + json.dumps(bad.stats()) + good.url
     assert "s3cret-pw" not in shown and "wrong-pw" not in shown
+
+
+def test_service_wiring_publishes_what_api_track_serves(broker, tmp_path):
+    """The live service (real uvicorn on port 0) with ``publish`` and ``asterix_out``
+    configured: MQTT track == /api/track, status retained, ASTERIX datagrams."""
+    import urllib.request
+
+    import numpy as np
+    uvicorn = pytest.importorskip("uvicorn")
+    from radar_io.encoding.asterix_cat048 import RHO_LSB_M, THETA_LSB_DEG, decode_records
+    from radar_io.service.app import build_app
+    from radar_io.service.config import ServiceConfig
+
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(10)
+    cfg = ServiceConfig(source="sim://?rate_hz=1000&sync_every_s=1&go_delay_s=0.5",
+                        data_dir=str(tmp_path / "data"), auto_record="manual",
+                        publish=f"mqtt://127.0.0.1:{broker.port}/svc?qos=1",
+                        asterix_out=f"udp://127.0.0.1:{rx.getsockname()[1]}")
+    app = build_app(cfg)
+    svc = app.state.service
+    pub = svc.mqtt
+    sub = Subscriber(broker.port, "svc")
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    grams: list[bytes] = []
+    try:
+        thread.start()                       # the lifespan starts the publisher
+        assert wait_for(lambda: server.started, 20)
+        port = server.servers[0].sockets[0].getsockname()[1]
+        assert wait_for(lambda: len(sub.seqs()) >= 2500 and sub.status and sub.sync, 30)
+        first = min(sub.seqs())              # what came before the broker said hello is dropped
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/track?since={first - 1}"
+                                    "&limit=2000", timeout=10) as r:
+            api = json.loads(r.read())["messages"]
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/status", timeout=10) as r:
+            status = json.loads(r.read())
+        while len(grams) < 200:              # the oldest datagrams, kept by the kernel
+            grams.append(rx.recv(65535))
+    finally:
+        server.should_exit = True            # the lifespan closes the publisher
+        thread.join(15)
+        wait_for(lambda: sub.status[-1:] == [{"online": False}], 10)
+        sub.close()
+        rx.close()
+    got = {m["msg_seq"]: m for m in sub.track}
+    assert len(got) == len(sub.track)                       # each msg_seq once
+    assert len(api) == 2000 and all(got[m["msg_seq"]] == m for m in api)
+    online = [s for s in sub.status if s.get("online")]
+    assert online and online[-1]["instance"] == status["instance"]
+    assert online[-1]["publish"]["mqtt"]["connected"] is True
+    assert status["publish"]["mqtt"]["published"] > 0
+    assert sub.status[-1] == {"online": False} and not pub.connected   # clean close
+    assert status["uplink"]["asterix"]["records"] > 0      # the worker's stats on /api/status
+    assert sub.sync[0]["msg_seq"] == svc.recorder.sync_events[0].msg_seq
+    recs = decode_records(b"".join(grams))
+    hist = [json.loads(text) for _, text in svc.history.since(0)]
+    valid = [m for m in hist if m["rx_good"] == 1 and m["go"] == 1]
+    n = len(recs["sr_m"])
+    assert n >= 200 and (recs["sim"] == 1).all() and (recs["sic"] == svc.site.asterix_sic).all()
+    sr = np.array([m["sr_c_m"] for m in valid[:n]])
+    az = np.array([m["az_c_deg"] for m in valid[:n]])
+    assert np.abs(recs["sr_m"] - sr).max() <= RHO_LSB_M
+    assert np.abs((recs["az_deg"] - az + 180) % 360 - 180).max() <= THETA_LSB_DEG
+
+
+def test_serve_refuses_a_bad_publish_url_in_one_line(tmp_path):
+    from conftest import run_cli
+
+    res = run_cli("serve", "--port", "0", "--data-dir", str(tmp_path),
+                  "--publish", "mqtt://radar:pw@127.0.0.1:1883/x", timeout=60)
+    err = res.stderr.decode().strip()
+    assert res.returncode == 2 and "\n" not in err and "not in the URL" in err and "pw" not in err

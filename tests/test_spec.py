@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import independent
 from radar_io.decoding.decoders import FrameDecoder, decode_bytes
@@ -146,3 +149,30 @@ def test_spec_declares_the_source_bit_numbering(spec):
     lsb = {f.name: f.lsb for f in spec.fields}
     assert lsb["dsr"] == 50 * 2**-11 and lsb["el"] == 180 * 2**-15 and lsb["tod"] == 1e-4
     assert np.isclose(spec.field("tod").max_raw, 863_999_999)
+
+
+_LINES = SPEC_TEXT.splitlines()
+_VALUE_LINES = [i for i, ln in enumerate(_LINES) if "=" in ln and not ln.lstrip().startswith("#")]
+_JUNK = ["0", "-1", "1e999", "true", '"x"', '""', "[]", "[1, 2]", "{}", "0xFFFFFFFFFF", "2.5",
+         '"1/0"', '"2**2**2**2**2"', "65536", "-0.0", '"big"', '"little"']
+
+
+@settings(max_examples=int(os.environ.get("RADAR_IO_FUZZ_EXAMPLES", "300")), deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.sampled_from(_VALUE_LINES), st.sampled_from(_JUNK + ["<drop>"])),
+                min_size=1, max_size=3))
+def test_mutated_spec_files_load_or_give_one_line(tmp_path, edits):
+    """Any value swapped for junk, or any line dropped: a spec, or one SpecError line naming the file."""
+    lines = list(_LINES)
+    for i, junk in edits:
+        key = lines[i].split("=", 1)[0]
+        lines[i] = "" if junk == "<drop>" else f"{key}= {junk}"
+    p = tmp_path / "mutated.toml"
+    p.write_text("\n".join(lines) + "\n")
+    try:
+        spec = load_spec(p)
+    except SpecError as exc:
+        msg = str(exc)
+        assert "\n" not in msg and str(p) in msg, msg
+    else:
+        assert spec.length == 24 and spec.byte_order == "big"

@@ -55,6 +55,11 @@ class ServiceConfig:
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
     can: str | None = None           #: aircraft air data: python-can "interface:channel"
     can_bitrate: Annotated[int, Gt(0)] | None = None
+    publish: str | None = None       #: MQTT: mqtt[s]://HOST:PORT/PREFIX[?qos=0|1] (sinks/mqtt.py)
+    mqtt_user: str | None = None     #: or RADAR_IO_MQTT_USER; never printed
+    mqtt_password: str | None = None  #: or RADAR_IO_MQTT_PASSWORD; never printed
+    mqtt_ca_file: str | None = None  #: mqtts:// CA bundle (default: the system's CAs)
+    asterix_out: str | None = None   #: ASTERIX CAT048: udp://host:port, a serial URL/device or a file
     alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:

@@ -96,6 +96,16 @@ class ServiceState:
             from radar_io.sinks.uplink import DASink
 
             self._sink_defs["da"] = DASink(cfg.da_out)
+        if cfg.asterix_out:  # interchange: ASTERIX CAT048 (sinks/asterix.py)
+            from radar_io.sinks.asterix import service_sink
+
+            self._sink_defs["asterix"] = service_sink(self, cfg.asterix_out)
+        self.mqtt: Any = None
+        if cfg.publish:  # interchange: MQTT track, status and sync events (sinks/mqtt.py)
+            from radar_io.sinks.mqtt import attach_to_service
+
+            self.mqtt = attach_to_service(self, cfg.publish, username=cfg.mqtt_user,
+                                          password=cfg.mqtt_password, ca_file=cfg.mqtt_ca_file)
         if cfg.can:
             from radar_io.sources.airdata import AirDataReader
 
@@ -114,6 +124,8 @@ class ServiceState:
             self.acq.processors.append(w.submit)
         if self.air is not None:
             self.air.start()
+        if self.mqtt is not None:
+            self.mqtt.start()  # never waits for the broker
         self.acq.start()
 
     def stop(self) -> None:
@@ -124,6 +136,8 @@ class ServiceState:
             self.runway_jobs.close()
         for w in self.sinks.values():
             w.close()
+        if self.mqtt is not None:
+            self.mqtt.close()  # last word on PREFIX/status: {"online": false}
         if self.air is not None:
             self.air.close()
 
@@ -173,6 +187,7 @@ class ServiceState:
         st["instance"] = self.instance
         st["path"] = self.cfg.path
         st["uplink"] = {k: w.stats() for k, w in self.sinks.items()}
+        st["publish"] = {"mqtt": self.mqtt.stats()} if self.mqtt is not None else {}
         st["airdata"] = self.air.stats() if self.air is not None else None
         return st
 

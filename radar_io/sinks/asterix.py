@@ -83,6 +83,7 @@ class AsterixFileWriter(Sink):
                                              suffix=".part", dir=directory)
         except OSError as exc:
             raise ConfigError(f"cannot write {self.target}: {exc.strerror}") from exc
+        os.fchmod(fd, 0o644)  # as the table writers (mkstemp makes 0600)
         self._out = os.fdopen(fd, "wb", buffering=1 << 20)
 
     def write(self, batch: Batch) -> int:
@@ -143,3 +144,13 @@ class AsterixFileWriter(Sink):
         enc = self.encoder
         return {"records": enc.records, "blocks": enc.blocks, "bytes": self.bytes,
                 "saturation": dict(enc.saturation), "format": self.format}
+
+
+def service_sink(svc: Any, target: str) -> AsterixSink:
+    """What ``serve --asterix-out URL`` opens: SAC/SIC from the service's site, SIM set for
+    the simulator. Run it in a :class:`~radar_io.sinks.worker.SinkWorker` fed by the
+    acquisition's processors."""
+    simulated = str(svc.cfg.source).startswith("sim:")
+    if svc.site is not None:
+        return AsterixSink(target, site=svc.site, simulated=simulated)
+    return AsterixSink(target, simulated=simulated)

@@ -128,6 +128,8 @@ class MqttPublisher:
             raise ConfigError("mqtt: batch_s must be in (0, 1] s and status_period_s > 0")
         self._username = username if username is not None else os.environ.get(USER_ENV)
         self._password = password if password is not None else os.environ.get(PASSWORD_ENV)
+        if ca_file is not None and not os.path.isfile(ca_file):
+            raise ConfigError(f"{self.url}: CA file {ca_file} not found")
         self._ca_file, self._client_id = ca_file, client_id
         self.batch_s, self.status_period_s = batch_s, status_period_s
         self.max_batch_messages = max_batch_messages
@@ -303,6 +305,12 @@ class MqttPublisher:
             return None
         if info.rc != mqtt.MQTT_ERR_SUCCESS:
             self.last_error = f"publish to {topic} failed: {mqtt.error_string(info.rc)}"
+            if info.rc == mqtt.MQTT_ERR_NO_CONN and self.target.qos:
+                with self._lock:  # paho keeps it and may still send it: not counted twice
+                    if info.mid in self._early:
+                        self._early.discard(info.mid)
+                    elif len(self._pending) < 100_000:
+                        self._pending[info.mid] = 0
             return None
         with self._lock:
             if info.mid in self._early:   # acknowledged already
@@ -386,3 +394,20 @@ class MqttSink(Sink):
 
     def stats(self) -> dict[str, Any]:
         return self.publisher.stats()
+
+
+def attach_to_service(svc: Any, url: str, **options: Any) -> MqttPublisher:
+    """What ``serve --publish URL`` wires: a publisher fed by the service's acquisition
+    (the numbered messages it hands the websocket hub), its ``status()`` and its recorder's
+    sync events. Call before the acquisition starts; ``start()`` / ``close()`` it with the
+    service. ``options``: username, password, ca_file, … of :class:`MqttPublisher`."""
+    pub = MqttPublisher(url, status=svc.status,
+                        sync_events=lambda: svc.recorder.sync_events, **options)
+    hub_publish, submit = svc.acq.publish, pub.submit
+
+    def publish(items: list[tuple[int, str]]) -> None:
+        hub_publish(items)
+        submit(items)
+
+    svc.acq.publish = publish
+    return pub

@@ -16,15 +16,9 @@ import pytest
 from radar_io.calibration import Pose, project, resect
 from radar_io.calibration.rotation import rotation_matrix, rotation_partials
 
-from .synthetic import FOCAL_MM, aerial_photo
+from .synthetic import FOCAL_MM, aerial_photo, c_pe
 
 K = np.diag([FOCAL_MM, FOCAL_MM, 1.0])
-
-
-def c_pe(phi: float, theta: float, psi: float) -> np.ndarray:
-    """Ground → camera: frame rotations ψ about Z, then θ about Y, then φ about X (radians)."""
-    rod = lambda v: cv2.Rodrigues(np.array(v, dtype=float))[0]  # noqa: E731 - active rotation
-    return rod([-phi, 0, 0]) @ rod([0, -theta, 0]) @ rod([0, 0, -psi])
 
 
 def opencv_pose(pose: Pose) -> tuple[np.ndarray, np.ndarray]:

@@ -33,12 +33,9 @@ class LiveServer:
         from radar_io.service.app import create_app
 
         self.app = create_app(cfg)
-        for r in routers:  # test peers: they take precedence over the app's own routes
-            n = len(self.app.router.routes)
+        for r in routers:  # test peers: matched first, so they win over the app's own routes
             self.app.include_router(r)
-            added = self.app.router.routes[n:]
-            del self.app.router.routes[n:]
-            self.app.router.routes[:0] = added
+            self.app.router.routes.insert(0, self.app.router.routes.pop())
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         self.sock.bind(("127.0.0.1", port))

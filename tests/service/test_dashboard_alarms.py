@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+import urllib.request
 from typing import Any
 
 from fastapi import APIRouter, Header, HTTPException
@@ -27,11 +28,11 @@ class AlarmPeer:
         self.acks: list[str] = []
         self.router = APIRouter()
 
-        @self.router.get("/api/alarms")
+        @self.router.get("/api/alarms", operation_id="peer_alarms")
         def alarms() -> list[dict[str, Any]]:
             return list(self.alarms.values())
 
-        @self.router.post("/api/alarms/{alarm_id}/ack")
+        @self.router.post("/api/alarms/{alarm_id}/ack", operation_id="peer_alarm_ack")
         def ack(alarm_id: str, authorization: str | None = Header(None)) -> dict[str, Any]:
             if authorization != f"Bearer {TOKEN}":
                 raise HTTPException(403, "wrong token")
@@ -80,10 +81,20 @@ def test_banner_shows_acknowledges_and_clears(tmp_path, browser):  # noqa: F811
         browser.wait_for("document.getElementById('alarms-acked').hidden", 5)
 
 
-def test_alarm_messages_on_the_websocket(sim_server, browser):  # noqa: F811
-    """No /api/alarms route here: no polling, alarms come only from the websocket."""
-    # as a service without an alarm engine: GET /api/alarms answers 404, the page stops polling
-    sim_server.app.state.service.alarms = None
+def test_alarm_messages_on_the_websocket(tmp_path, browser):  # noqa: F811
+    """No /api/alarms route here (a router without routes replaces it): no polling, alarms
+    come only from the websocket."""
+    no_alarms = APIRouter()
+
+    @no_alarms.get("/api/alarms", include_in_schema=False)
+    def gone() -> None:
+        raise HTTPException(404, "no alarm engine")
+
+    with live_server(service_config(tmp_path / "svc"), routers=(no_alarms,)) as srv:
+        websocket_alarms(srv, browser)
+
+
+def websocket_alarms(sim_server, browser) -> None:  # noqa: F811
     browser.navigate(sim_server.base + "/")
     browser.wait_for("radarState.connected && radarAlarms.endpoint === false", 10)
     svc = sim_server.app.state.service
@@ -119,3 +130,11 @@ def test_report_link_follows_the_selected_recording(sim_server, browser):  # noq
     assert browser.eval("document.getElementById('rec-report').href") == \
         f"{sim_server.base}/api/recordings/{ids[1]}/report"
     assert not browser.eval("document.getElementById('rec-report').hidden")
+    assert browser.eval("document.getElementById('rec-report-pdf').href") == \
+        f"{sim_server.base}/api/recordings/{ids[1]}/report?format=pdf"
+    if "/api/recordings/{rec_id}/report" in sim_server.get("/openapi.json")["paths"]:
+        # the report service is there: the link gives a page
+        href = browser.eval("document.getElementById('rec-report').href")
+        with urllib.request.urlopen(href, timeout=120) as r:
+            assert r.headers["Content-Type"].startswith("text/html")
+            assert b"<html" in r.read(4096).lower()

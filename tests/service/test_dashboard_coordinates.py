@@ -44,6 +44,7 @@ def test_runway_to_radar_matches_the_python_transform(sim_server):  # noqa: F811
     ({"xr_m": [], "yr_m": [], "hr_m": []}, "xr_m"),
     ({"xr_m": [1.0], "yr_m": ["north"], "hr_m": [0.0]}, "yr_m"),
     ({"xr_m": [1.0], "yr_m": [0.0]}, "hr_m"),
+    ({"xr_m": [0.0] * 10_001, "yr_m": [0.0] * 10_001, "hr_m": [0.0] * 10_001}, "xr_m"),
 ])
 def test_bad_bodies_are_422_naming_the_field(sim_server, body, field):  # noqa: F811
     code, doc = sim_server.request("POST", ROUTE, body)

@@ -7,9 +7,9 @@ import { control, getJSON, onControl } from "./api.js";
 export const reportUrl = (id) => `/api/recordings/${encodeURIComponent(id)}/report`;
 
 function updateLinks() {
-  const id = $("rec-list").value, rep = $("rec-report");
-  rep.hidden = !id;
-  if (id) rep.href = reportUrl(id);
+  const id = $("rec-list").value, rep = $("rec-report"), pdf = $("rec-report-pdf");
+  rep.hidden = pdf.hidden = !id;
+  if (id) { rep.href = reportUrl(id); pdf.href = reportUrl(id) + "?format=pdf"; }
 }
 
 export async function listRecordings() {
