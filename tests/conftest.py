@@ -41,13 +41,6 @@ def require_program(name: str, *alternatives: str) -> str:
 
 _skipped: list[str] = []
 
-#: The only tests allowed to skip with CI=true, each with the reason it cannot run on CI's
-#: machine (Debian 12). Keep this short: every entry is a check CI never makes.
-CI_MAY_SKIP: dict[str, str] = {
-    "tests/test_serial_latency.py::test_udev_rules_verify":
-        "Debian 12's udevadm (systemd 252) has no 'verify' (needs systemd >= 254); the rule "
-        "file's content is checked by the other tests of that file",
-}
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
@@ -61,7 +54,7 @@ def pytest_collectreport(report: pytest.CollectReport) -> None:
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    """With ``CI=true``, a session that skipped anything (but :data:`CI_MAY_SKIP`) fails (exit 1)."""
+    """With ``CI=true``, a session that skipped anything fails (exit 1)."""
     if not in_ci():
         return
     tr = session.config.pluginmanager.get_plugin("terminalreporter")
@@ -72,10 +65,7 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
         else:
             print(msg, file=sys.stderr)
 
-    for nodeid in _skipped:
-        if nodeid in CI_MAY_SKIP:
-            say(f"CI=true: {nodeid} skipped, allowed: {CI_MAY_SKIP[nodeid]}", yellow=True)
-    bad = [n for n in _skipped if n not in CI_MAY_SKIP]
+    bad = list(_skipped)
     if bad and session.exitstatus == 0:
         say(f"CI=true: {len(bad)} test(s) skipped, which CI does not allow: "
             + ", ".join(bad[:10]) + (" ..." if len(bad) > 10 else ""), red=True)

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import logging
 import re
-import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
@@ -77,13 +75,3 @@ def test_udev_rule_sets_ftdi_latency_timer_to_1ms():
     assert keys[("ATTRS{idProduct}", "==")] == "6001"
     link = [r for r in rules if ("SYMLINK", "+=", "radar") in r]
     assert len(link) == 1
-
-
-def test_udev_rules_verify():
-    udevadm = shutil.which("udevadm")
-    if udevadm is None:
-        pytest.skip("udevadm is not installed (no systemd-udev in this environment)")
-    r = subprocess.run([udevadm, "verify", str(RULES)], capture_output=True, text=True)
-    if "Unknown command" in r.stderr or "unrecognized" in r.stderr:
-        pytest.skip("this udevadm has no 'verify' (systemd < 254)")
-    assert r.returncode == 0, r.stderr
