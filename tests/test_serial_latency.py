@@ -7,7 +7,6 @@ import logging
 import re
 from pathlib import Path
 
-
 from radar_io.benchmarks.service_load import Pty
 from radar_io.sources.serialport import SerialSource
 
