@@ -53,16 +53,37 @@ class Pty:
 
 
 class ServeProcess:
-    """``radar-io serve`` in a child process on 127.0.0.1."""
+    """``radar-io serve`` in a child process on 127.0.0.1, on a port the kernel picks
+    (``--port 0``; the real port is read from the ``listening on`` line)."""
 
     def __init__(self, source: str, data_dir: Path, port: int | None = None,
-                 extra: tuple[str, ...] = (), env: dict[str, str] | None = None) -> None:
-        self.port = port or free_port()
-        self.base = f"http://127.0.0.1:{self.port}"
+                 extra: tuple[str, ...] = (), env: dict[str, str] | None = None,
+                 start_timeout_s: float = 60.0) -> None:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "radar_io.cli", "serve", "--source", source, "--host",
-             "127.0.0.1", "--port", str(self.port), "--data-dir", str(data_dir), *extra],
+             "127.0.0.1", "--port", str(port or 0), "--data-dir", str(data_dir), *extra],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env={**os.environ, **(env or {})})
+        self.stderr_lines: list[str] = []
+        found = threading.Event()
+        self.port = 0
+
+        def drain() -> None:  # read stderr to the end: a full pipe would block the server
+            assert self.proc.stderr is not None
+            for raw in self.proc.stderr:
+                line = raw.decode(errors="replace")
+                self.stderr_lines.append(line)
+                if not found.is_set() and "listening on http://" in line:
+                    self.port = int(line.split("listening on http://", 1)[1].split("/", 1)[0]
+                                    .rsplit(":", 1)[1])
+                    found.set()
+            found.set()
+
+        self._drain = threading.Thread(target=drain, daemon=True)
+        self._drain.start()
+        if not found.wait(start_timeout_s) or not self.port:
+            err = self.stop()
+            raise RuntimeError(f"serve did not start: {err.strip()}")
+        self.base = f"http://127.0.0.1:{self.port}"
 
     def get(self, path: str) -> Any:
         with urllib.request.urlopen(self.base + path, timeout=5) as r:
@@ -72,7 +93,8 @@ class ServeProcess:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                raise RuntimeError(f"serve exited: {self.proc.stderr.read().decode()}")
+                self._drain.join(5)
+                raise RuntimeError(f"serve exited: {''.join(self.stderr_lines)}")
             try:
                 st = self.get("/api/status")
                 if st["connected"] or not connected:
@@ -83,13 +105,16 @@ class ServeProcess:
         raise TimeoutError("service did not become ready")
 
     def stop(self) -> str:
-        self.proc.terminate()
-        try:
-            _, err = self.proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            _, err = self.proc.communicate()
-        return err.decode(errors="replace")
+        """Terminate (kill after 10 s); the process's stderr."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._drain.join(5)
+        return "".join(self.stderr_lines)
 
 
 @dataclass

@@ -17,7 +17,7 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--source", help="sim:// (default), a serial device or pyserial URL, "
                    "replay://PATH.rdrlog?speed=1")
     p.add_argument("--host", help="bind address (default 127.0.0.1)")
-    p.add_argument("--port", type=int, help="TCP port (default 8000)")
+    p.add_argument("--port", type=int, help="TCP port (default 8000; 0 = any free port, printed)")
     p.add_argument("--site", help="site TOML (sim:// defaults to the demo site)")
     p.add_argument("--calibration", help="calibration set JSON to apply at start")
     p.add_argument("--data-dir", help="recordings and calibration sets (default ./radar-data)")
@@ -28,34 +28,55 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--path", help="reference path TOML: deviation needles, DY/DZ in messages")
     p.add_argument("--tlm-out", help="TLM1 uplink: udp://host:port, a serial URL/device or a file")
     p.add_argument("--da-out", help="D/A recorder words: a serial URL/device or a file")
+    p.add_argument("--publish", metavar="URL", help="MQTT: mqtt://HOST:PORT/PREFIX[?qos=0|1] or "
+                   "mqtts://…; user/password from the config or RADAR_IO_MQTT_USER/PASSWORD")
+    p.add_argument("--asterix-out", metavar="URL", help="ASTERIX CAT048 target reports: "
+                   "udp://HOST:PORT (one data block per datagram), a serial URL or a file")
     p.add_argument("--can", metavar="INTERFACE:CHANNEL",
                    help="aircraft air data over CAN, e.g. socketcan:can0 or virtual:air")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    """Validate the config, build the app (refusing what can never work), bind, print the
+    real address on stderr (``listening on http://HOST:PORT/``), then serve until stopped."""
     import logging
+    import socket
 
     import uvicorn
 
-    from radar_io.service.app import create_app
+    from radar_io.service.app import build_app
     from radar_io.service.config import load_config
 
     cfg = load_config(args.config, {
         "source": args.source, "host": args.host, "port": args.port, "site": args.site,
         "calibration": args.calibration, "data_dir": args.data_dir,
         "auto_record": args.auto_record, "token_file": args.token_file, "path": args.path,
-        "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can})
+        "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can,
+        "publish": args.publish, "asterix_out": args.asterix_out})
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    app = create_app(cfg)
-    svc = app.state.service
-    print(f"radar-io serve: source {cfg.source}, dashboard http://{cfg.host}:{cfg.port}/ "
-          f"(API docs /docs), data in {svc.data_dir.resolve()}, control "
-          f"{'enabled' if svc.token else 'disabled (no token configured)'}", file=sys.stderr)
+    app = build_app(cfg)
+    state = app.state.service
     try:
-        # per-message deflate would compress every measurement once per client: off
-        uvicorn.run(app, host=cfg.host, port=int(cfg.port), log_level="warning",
-                    ws_ping_interval=20, ws_per_message_deflate=False)
+        family = socket.getaddrinfo(cfg.host, cfg.port, type=socket.SOCK_STREAM)[0][0]
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((cfg.host, cfg.port))
     except OSError as exc:  # e.g. address already in use
-        raise ConfigError(f"cannot serve on {cfg.host}:{cfg.port}: {exc.strerror}") from exc
+        raise ConfigError(f"cannot serve on {cfg.host}:{cfg.port}: "
+                          f"{exc.strerror or exc}") from exc
+    port = sock.getsockname()[1]
+    host = f"[{cfg.host}]" if ":" in cfg.host else cfg.host
+    print(f"radar-io serve: source {cfg.source}, data in {state.data_dir.resolve()}, control "
+          f"{'enabled' if state.token else 'disabled (no token configured)'}", file=sys.stderr)
+    print(f"listening on http://{host}:{port}/ (dashboard; API docs /docs)", file=sys.stderr,
+          flush=True)
+    # per-message deflate would compress every measurement once per client: off
+    config = uvicorn.Config(app, log_level="warning", ws_ping_interval=20,
+                            ws_per_message_deflate=False,
+                            h11_max_incomplete_event_size=max(64 << 10, 4 * cfg.max_header_kb << 10))
+    try:
+        uvicorn.Server(config).run(sockets=[sock])
+    finally:
+        sock.close()
     return 0

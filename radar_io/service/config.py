@@ -1,5 +1,9 @@
 """Service configuration: a TOML file, overridden by command-line options.
 
+Every field is validated on its own (type, range, choice); an unknown key, a wrong type
+or a value out of range is refused in one line naming the file and the field
+(:class:`~radar_io.errors.ConfigError`; ``serve`` exits 2).
+
 The control token comes from the environment variable ``RADAR_IO_TOKEN`` or
 from the file named by ``token_file``; there is never a default token. With no
 token configured the control endpoints are disabled and say so.
@@ -7,14 +11,17 @@ token configured the control endpoints are disabled and say so.
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from annotated_types import Ge, Gt, Le
 
 from radar_io.errors import ConfigError
-from radar_io.wirespec.frame import spec_dir
 from radar_io.textfiles import read_toml
+from radar_io.wirespec.frame import spec_dir
 
 TOKEN_ENV = "RADAR_IO_TOKEN"
 
@@ -23,23 +30,37 @@ TOKEN_ENV = "RADAR_IO_TOKEN"
 class ServiceConfig:
     source: str = "sim://"
     host: str = "127.0.0.1"
-    port: int = 8000
+    port: Annotated[int, Ge(0), Le(65535)] = 8000  #: 0 = any free port (printed at start)
     site: str | None = None          #: site TOML; sim:// defaults to the demo site
     calibration: str | None = None   #: calibration set JSON applied at start
     data_dir: str = "radar-data"     #: recordings, sync indices, calibration sets
     token_file: str | None = None
-    auto_record: str = "go"          #: go | manual | always
-    preroll_s: float = 2.0
-    history_size: int = 120_000      #: messages kept for /api/track and ws resume (2 min at 1 kHz)
-    ws_queue_size: int = 5000        #: per websocket client, oldest dropped beyond
+    auto_record: Literal["go", "manual", "always"] = "go"
+    preroll_s: Annotated[float, Ge(0.0), Le(600.0)] = 2.0
+    retry_s: Annotated[float, Gt(0.0), Le(3600.0)] = 5.0  #: automatic recording: retry after a disk error
+    low_space_mb: Annotated[float, Ge(0.0)] = 1024.0      #: status storage.low_space below this free space
+    runway_queue: Annotated[int, Ge(0), Le(100)] = 2      #: runway video jobs waiting (429 beyond)
+    history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)
+    ws_queue_size: Annotated[int, Ge(1), Le(1_000_000)] = 5000  #: per client; oldest skipped beyond
+    ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
+    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.01  #: fan-out tick
+    allowed_origins: list[str] = field(default_factory=list)  #: besides the same host
+    max_body_kb: Annotated[int, Ge(1), Le(1 << 20)] = 1024    #: JSON bodies (413 beyond)
+    max_upload_mb: Annotated[int, Ge(1), Le(1 << 16)] = 512   #: /api/runway uploads
+    max_header_kb: Annotated[int, Ge(1), Le(1024)] = 16       #: all request headers (431 beyond)
     spec: str | None = None
     path: str | None = None          #: reference path TOML: adds dy_m, dz_m, along_m, leg
     tlm_out: str | None = None       #: TLM1 uplink: udp://host:port, a serial URL/device or a file
-    tlm_cycle_s: float = 0.02        #: one uplink frame per cycle (the source's 20 ms)
+    tlm_cycle_s: Annotated[float, Ge(0.0), Le(10.0)] = 0.02  #: one uplink frame per cycle
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
     can: str | None = None           #: aircraft air data: python-can "interface:channel"
-    can_bitrate: int | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
+    can_bitrate: Annotated[int, Gt(0)] | None = None
+    publish: str | None = None       #: MQTT: mqtt[s]://HOST:PORT/PREFIX[?qos=0|1] (sinks/mqtt.py)
+    mqtt_user: str | None = None     #: or RADAR_IO_MQTT_USER; never printed
+    mqtt_password: str | None = None  #: or RADAR_IO_MQTT_PASSWORD; never printed
+    mqtt_ca_file: str | None = None  #: mqtts:// CA bundle (default: the system's CAs)
+    asterix_out: str | None = None   #: ASTERIX CAT048: udp://host:port, a serial URL/device or a file
+    alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:
         if self.site:
@@ -64,23 +85,34 @@ class ServiceConfig:
         return None
 
 
+def _validate(doc: dict[str, Any], where: str) -> ServiceConfig:
+    """ServiceConfig from a mapping, field by field; ConfigError names ``where`` and the field."""
+    import pydantic
+
+    known = [f.name for f in fields(ServiceConfig)]
+    unknown = sorted(set(doc) - set(known))
+    if unknown:
+        raise ConfigError(f"{where}: unknown key {unknown[0]!r} (known: {', '.join(known)})")
+    try:
+        # JSON mode, strict: a dict for the dataclass, and no "8000" for an int
+        cfg = pydantic.TypeAdapter(ServiceConfig).validate_json(json.dumps(doc, default=str),
+                                                                strict=True)
+    except pydantic.ValidationError as exc:
+        err = exc.errors()[0]
+        loc = ".".join(str(p) for p in err["loc"])
+        raise ConfigError(f"{where}: field {loc!r}: {err['msg']} (got {err.get('input')!r})") \
+            from exc
+    if cfg.can is not None and ":" not in cfg.can:
+        raise ConfigError(f"{where}: field 'can': expected 'interface:channel', e.g. "
+                          f"socketcan:can0 (got {cfg.can!r})")
+    return cfg
+
+
 def load_config(path: str | None, overrides: dict[str, Any]) -> ServiceConfig:
-    """Config from a TOML file (optional) with non-None overrides applied."""
+    """Config from a TOML file (optional) with non-None overrides applied, validated."""
     doc: dict[str, Any] = {}
     if path:
         doc = read_toml(path, "config file")
-    known = {f.name for f in fields(ServiceConfig)} - {"extra"}
-    unknown = set(doc) - known
-    if unknown:
-        raise ConfigError(f"config file {path}: unknown key(s) {', '.join(sorted(unknown))}")
-    cfg = ServiceConfig(**doc)
-    for k, v in overrides.items():
-        if v is not None:
-            setattr(cfg, k, v)
-    if cfg.auto_record not in ("go", "manual", "always"):
-        raise ConfigError("auto_record must be go, manual or always")
-    if cfg.can is not None and ":" not in cfg.can:
-        raise ConfigError(f"can = {cfg.can!r}: expected 'interface:channel', e.g. socketcan:can0")
-    if not 0 < int(cfg.port) < 65536:
-        raise ConfigError(f"port {cfg.port} is out of range")
-    return cfg
+    _validate(doc, f"config file {path}" if path else "config")
+    merged = {**doc, **{k: v for k, v in overrides.items() if v is not None}}
+    return _validate(merged, f"config file {path} + command line" if path else "command line")

@@ -18,6 +18,9 @@ from radar_io.sinks.base import Batch, Sink
 SINKS: dict[str, str] = {
     "tlm1": "radar_io.sinks.uplink:TelemetrySink",
     "da": "radar_io.sinks.uplink:DASink",
+    "asterix": "radar_io.sinks.asterix:AsterixSink",
+    "mqtt": "radar_io.sinks.mqtt:MqttSink",
+    "ast": "radar_io.sinks.asterix:AsterixFileWriter",   # decode -o OUT.ast (not a table)
 }
 
 

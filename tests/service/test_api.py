@@ -33,6 +33,12 @@ def svc(tmp_path_factory):
     s.stop()
 
 
+def msg(doc) -> str:
+    """The reasons of an error body (a list of {loc, msg, type}), joined."""
+    assert isinstance(doc["detail"], list) and all({"loc", "msg", "type"} <= set(d) for d in doc["detail"])
+    return "; ".join(d["msg"] for d in doc["detail"])
+
+
 def call(svc, method: str, path: str, body=None, token: str | None = TOKEN) -> tuple[int, dict]:
     headers = {"Content-Type": "application/json"}
     if token is not None:
@@ -61,9 +67,9 @@ def test_status_has_every_field(svc):
 ])
 def test_control_needs_the_token(svc, method, path, body):
     code, doc = call(svc, method, path, body, token=None)
-    assert code == 401 and "Bearer" in doc["detail"]
+    assert code == 401 and "Bearer" in msg(doc)
     code, doc = call(svc, method, path, body, token="wrong")
-    assert code == 403 and doc["detail"] == "wrong token"
+    assert code == 403 and msg(doc) == "wrong token"
 
 
 def test_control_disabled_without_a_configured_token(tmp_path):
@@ -74,7 +80,7 @@ def test_control_disabled_without_a_configured_token(tmp_path):
                                      headers={"Authorization": "Bearer anything"})
         with pytest.raises(urllib.error.HTTPError) as e:
             urllib.request.urlopen(req, timeout=5)
-        assert e.value.code == 403 and "control is disabled" in json.loads(e.value.read())["detail"]
+        assert e.value.code == 403 and "control is disabled" in msg(json.loads(e.value.read()))
         assert s.get("/api/status")["control_enabled"] is False
     finally:
         s.stop()
@@ -123,7 +129,7 @@ def test_validation_errors_are_422_with_a_reason(svc):
     code, doc = call(svc, "POST", "/api/replay", {"recording": "x", "speed": -4})
     assert code == 422 and "speed" in json.dumps(doc)
     code, doc = call(svc, "PUT", "/api/calibration", {"biases": {"dsr_m": "a lot"}})
-    assert code == 422 and "dsr_m" in doc["detail"]
+    assert code == 422 and "dsr_m" in msg(doc)
     code, _ = call(svc, "GET", "/api/track?limit=0")
     assert code == 422
 
@@ -142,7 +148,7 @@ def test_recordings_list_download_404_and_traversal(svc):
     assert call(svc, "GET", "/api/recordings/nope")[0] == 404
     for bad in ("..%2F..%2Fetc%2Fpasswd", "a..b", "%2Fetc%2Fpasswd"):
         code, _ = call(svc, "GET", f"/api/recordings/{bad}")
-        assert code in (400, 404), bad
+        assert code in (404, 422), bad  # a bad id is a validation error (422)
     events = svc.get(f"/api/sync-events?recording={rec}")
     assert events and all(e["recording"] == rec for e in events)
     assert all(b["tod_s"] - a["tod_s"] == pytest.approx(1.0, abs=0.002)
@@ -203,23 +209,36 @@ def test_openapi_docs(svc):
     assert "/api/status" in api["paths"] and "/api/replay/seek" in api["paths"]
 
 
-def test_serve_with_no_arguments_is_the_readme_command(tmp_path):
+def test_serve_defaults_and_port_0_prints_the_real_port(tmp_path):
+    """The README's ``radar-io serve`` with only ``--port 0``: the simulator, the demo site,
+    ./radar-data, on 127.0.0.1 at the port it prints."""
     env = {k: v for k, v in os.environ.items() if k != "RADAR_IO_TOKEN"}
-    p = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "serve"], cwd=tmp_path, env=env,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    p = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "serve", "--port", "0"],
+                         cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                         text=True)
     try:
+        port = None
+        for line in p.stderr:
+            if "listening on http://" in line:
+                host_port = line.split("listening on http://", 1)[1].split("/", 1)[0]
+                assert host_port.startswith("127.0.0.1:")
+                port = int(host_port.rsplit(":", 1)[1])
+                break
+        assert port and port != 0, "serve printed no port"
+        base = f"http://127.0.0.1:{port}"
+
         def status():
             try:
-                with urllib.request.urlopen("http://127.0.0.1:8000/api/status", timeout=2) as r:
+                with urllib.request.urlopen(base + "/api/status", timeout=2) as r:
                     return json.loads(r.read())
             except OSError:
-                assert p.poll() is None, p.stderr.read().decode()
+                assert p.poll() is None
                 return None
 
         st = wait_for(lambda: (s := status()) and s["frames"] > 0 and s, timeout_s=30,
-                      what="serve on 127.0.0.1:8000")
+                      what="serve on the printed port")
         assert st["source"] == "sim://" and st["site"] == "demo"
-        with urllib.request.urlopen("http://127.0.0.1:8000/", timeout=5) as r:
+        with urllib.request.urlopen(base + "/", timeout=5) as r:
             assert b"radar_io" in r.read()
         assert (tmp_path / "radar-data" / "recordings").is_dir()
     finally:
@@ -265,7 +284,7 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
     assert code == 200 and svc.get("/api/status")["calibration"] == "photo-1"
     code, doc = call(svc, "POST", "/api/calibration/bias",
                      {"id": "x", "observations": [{**obs[0], "sync_index": 999}]})
-    assert code == 422 and "no index 999" in doc["detail"]
+    assert code == 422 and "no index 999" in msg(doc)
     call(svc, "PUT", "/api/calibration", {"id": "zero", "biases": {}})
 
 

@@ -20,7 +20,7 @@ GO, GO_SYNC, IDLE, SYNC = 0x0005, 0x8005, 0x0004, 0x8004
 def pipeline(tmp_path, spec, preroll_s: float = 2.0, source: str = "loop://"):
     rec = Recorder(tmp_path / "data", spec, None, source, auto="go", preroll_s=preroll_s)
     published: list = []
-    acq = Acquisition(source, spec, rec, History(10_000), published.extend)
+    acq = Acquisition(source, spec, rec, History(8 << 20), published.extend)
     return acq, rec, published
 
 

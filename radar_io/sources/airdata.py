@@ -1,15 +1,14 @@
-"""Live extras around the acquisition pipeline (radar-interface.md §6–§9).
+"""The aircraft's air data as a live source (radar-interface.md §9).
 
-* :class:`DeviationProcessor` adds ``dy_m, dz_m, along_m, leg`` from a reference path;
-* :class:`AirDataReader` reads the aircraft's air data from a CAN bus (python-can +
-  the DBC) and keeps the recent samples in SI units, with the radar ground range and
-  height seen when each arrived (for the profile overlay).
+:class:`AirDataReader` reads the aircraft's 8 Hz air data from a CAN bus (python-can +
+the DBC, :mod:`radar_io.sources.canbus`) on its own thread and keeps the recent samples
+in SI units, with the radar ground range and height seen when each arrived (for the
+profile overlay). Construct it (opens the bus), then :meth:`~AirDataReader.start`.
 """
 
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections import deque
@@ -17,35 +16,12 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.coordinates.reference_path import DEVIATION_COLUMNS, ReferencePath
-from radar_io.sinks.worker import message_columns
 
-log = logging.getLogger("radar_io.outputs")
+log = logging.getLogger("radar_io.airdata")
 
 KT = 1852.0 / 3600.0   # m/s per knot
 FT = 0.3048            # m per foot
 NM = 1852.0            # m per nautical mile
-
-
-
-
-class DeviationProcessor:
-    """Adds the path deviation to each message (None / leg -1 when there is no position)."""
-
-    def __init__(self, path: ReferencePath) -> None:
-        self.path = path
-
-    def __call__(self, msgs: list[dict[str, Any]]) -> None:
-        cols = message_columns(msgs, self.path.columns)
-        if len(cols) < 3:
-            for m in msgs:
-                m.update(dy_m=None, dz_m=None, along_m=None, leg=-1)
-            return
-        dev = self.path.deviation(*(cols[c] for c in self.path.columns))
-        for i, m in enumerate(msgs):
-            for c in DEVIATION_COLUMNS:
-                v = dev[c][i]
-                m[c] = int(v) if c == "leg" else (None if v != v else float(v))
 
 
 class AirDataReader:
@@ -66,7 +42,11 @@ class AirDataReader:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="can-airdata", daemon=True)
-        self._thread.start()
+
+    def start(self) -> None:
+        """Start the reader thread (the service does it in its lifespan)."""
+        if not self._thread.is_alive():
+            self._thread.start()
 
     def _run(self) -> None:
         pending: dict[str, float] | None = None
@@ -131,7 +111,8 @@ class AirDataReader:
 
     def close(self) -> None:
         self._stop.set()
-        self._thread.join(2)
+        if self._thread.is_alive():
+            self._thread.join(2)
         try:
             self.bus.shutdown()
         except Exception:  # noqa: BLE001

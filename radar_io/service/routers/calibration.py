@@ -1,0 +1,74 @@
+"""Calibration: the active set (get, put live), and the bias estimate from photo
+observations at recorded sync events (calibration.md §8)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Body, Depends
+from pydantic import BaseModel, Field
+
+from radar_io.decoding.biases import Calibration, save_calibration, utc_now_iso
+from radar_io.service.errors import responses
+from radar_io.service.routers.deps import CONTROL, get_state
+from radar_io.service.state import ServiceState, check_id
+
+router = APIRouter(tags=["calibration"])
+
+
+class PhotoObservation(BaseModel):
+    """A photo position (from resection) at a sync event of a recording."""
+
+    group: str = Field(description="flight / group name for the per-group statistics")
+    recording: str = Field(description="recording id holding the sync event")
+    sync_index: int = Field(ge=0, description="0-based index of the SYNC 0→1 edge in the recording")
+    photo_x_m: float | None = Field(None, description="north of the radar (ground frame)")
+    photo_y_m: float | None = Field(None, description="east of the radar")
+    photo_z_m: float | None = Field(None, description="down (Z = −H)")
+    photo_sr_m: float | None = None
+    photo_el_deg: float | None = None
+    photo_az_deg: float | None = None
+
+
+class BiasRequest(BaseModel):
+    id: str = Field(description="id of the calibration set to propose")
+    observations: list[PhotoObservation] = Field(min_length=1)
+
+
+@router.get("/api/calibration")
+def get_calibration(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
+    """The calibration set applied now."""
+    return state.acq.calibration.to_dict()
+
+
+@router.put("/api/calibration", tags=["control"], dependencies=CONTROL,
+            responses=responses(401, 403, 422, 507))
+def put_calibration(doc: dict[str, Any] = Body(..., examples=[{
+        "format": "radar_io-calibration/1", "id": "flight-7",
+        "biases": {"dsr_m": 3.1, "del_deg": -0.012, "daz_deg": 0.034}}]),
+        state: ServiceState = Depends(get_state)) -> dict[str, Any]:
+    """Apply a calibration set live (and keep it as the active set for restarts)."""
+    cal = Calibration.from_dict(doc, source="request")  # ConfigError → 422
+    if not cal.created_utc:
+        cal = Calibration(**{**cal.__dict__, "created_utc": utc_now_iso()})
+    check_id(cal.id, "calibration id")
+    save_calibration(cal, state.cal_dir / f"{cal.id}.json")
+    save_calibration(cal, state.cal_dir / "active.json")
+    state.acq.set_calibration(cal)
+    return cal.to_dict()
+
+
+@router.post("/api/calibration/bias", tags=["control"], dependencies=CONTROL,
+             responses=responses(401, 403, 404, 422))
+def estimate_bias(req: BiasRequest, state: ServiceState = Depends(get_state)) -> dict[str, Any]:
+    """Pair photo positions with the radar's SR'/EL'/AZ' at the recorded sync events and
+    estimate ΔSR/ΔEL/ΔAZ (calibration.md §8). Nothing is applied: review the proposed
+    set, then PUT it to /api/calibration."""
+    from radar_io.calibration.pairing import estimate_bias as estimate
+    from radar_io.calibration.sync_pairs import radar_at_sync_events
+
+    check_id(req.id, "calibration id")
+    events = {rec: radar_at_sync_events(state.recording_path(rec), state.spec)
+              for rec in dict.fromkeys(ob.recording for ob in req.observations)}
+    return estimate([ob.model_dump() for ob in req.observations], events, req.id,
+                    method="calibration.md §8 via POST /api/calibration/bias")

@@ -1,0 +1,34 @@
+"""Dependencies shared by the routers: the service state and the control token."""
+
+from __future__ import annotations
+
+import secrets
+
+from fastapi import Depends, Header, HTTPException, Request
+from starlette.requests import HTTPConnection
+
+from radar_io.service.config import TOKEN_ENV
+from radar_io.service.state import ServiceState
+
+
+def get_state(conn: HTTPConnection) -> ServiceState:
+    """The :class:`ServiceState` of the app serving this request or websocket."""
+    return conn.app.state.service
+
+
+def require_token(request: Request,
+                  authorization: str | None = Header(None, description="Bearer <token>")) -> None:
+    """Control endpoints: 403 when no token is configured or it is wrong, 401 without one."""
+    token = get_state(request).token
+    if token is None:
+        raise HTTPException(403, f"control is disabled: no token configured (set {TOKEN_ENV} "
+                            "or token_file)")
+    if not authorization or not authorization.startswith("Bearer "):
+        raise HTTPException(401, "control needs 'Authorization: Bearer <token>'",
+                            headers={"WWW-Authenticate": "Bearer"})
+    if not secrets.compare_digest(authorization[7:].strip().encode(), token.encode()):
+        raise HTTPException(403, "wrong token")
+
+
+#: ``dependencies=CONTROL`` on a route or router: the token is required
+CONTROL = [Depends(require_token)]

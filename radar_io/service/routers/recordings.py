@@ -1,0 +1,85 @@
+"""Recordings: list, download, sync events; start and stop (control)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException, Query
+from fastapi.responses import FileResponse
+
+from radar_io.errors import ConflictError, StorageError
+from radar_io.service.errors import responses
+from radar_io.service.routers.deps import CONTROL, get_state
+from radar_io.service.state import ServiceState
+
+router = APIRouter(tags=["recordings"])
+
+
+class OctetStream(FileResponse):
+    media_type = "application/octet-stream"
+
+
+@router.get("/api/recordings")
+def recordings(state: ServiceState = Depends(get_state)) -> list[dict[str, Any]]:
+    """Recordings in the data directory, newest first."""
+    out = []
+    for p in sorted(state.recorder.dir.glob("*.rdrlog"), reverse=True):
+        st = p.stat()
+        out.append({"id": p.stem, "size_bytes": st.st_size, "modified_unix_s": st.st_mtime,
+                    "open": p.stem == state.recorder.current,
+                    "download": f"/api/recordings/{p.stem}"})
+    return out
+
+
+@router.get("/api/recordings/{rec_id}", response_class=OctetStream,
+            responses={200: {"content": {"application/octet-stream": {
+                "schema": {"type": "string", "format": "binary"}}},
+                "description": "the .rdrlog file"}, **responses(404, 422)})
+def download(rec_id: str, state: ServiceState = Depends(get_state)) -> Any:
+    """The .rdrlog file itself; one still being written comes as a snapshot up to its last
+    whole chunk at request time (Content-Length = body, a prefix of the final file)."""
+    p = state.recording_path(rec_id)
+    size = state.recorder.committed_bytes(rec_id)  # storage: snapshot of an open recording
+    if size is not None:
+        from fastapi.responses import StreamingResponse
+
+        from radar_io.recording.rdrlog import iter_prefix
+
+        return StreamingResponse(iter_prefix(p, size), media_type="application/octet-stream",
+                                 headers={"Content-Length": str(size), "Content-Disposition":
+                                          f'attachment; filename="{p.name}"'})
+    return OctetStream(p, media_type="application/octet-stream", filename=p.name)
+
+
+@router.get("/api/sync-events", responses=responses(404, 422))
+def sync_events(recording: str | None = None, limit: int = Query(1000, ge=1, le=100000),
+                state: ServiceState = Depends(get_state)) -> list[dict[str, Any]]:
+    """Sync (camera shutter) events: SYNC 0→1 edges. Live (no ``recording``): as seen,
+    with SEQ, TOD, receive time and the recording that holds them. For a recording: its
+    edges decoded from the file, numbered by ``sync_index`` — the numbering
+    POST /api/calibration/bias uses — with the radar's SR'/EL'/AZ' at each."""
+    if recording is not None:
+        from radar_io.calibration.sync_pairs import radar_at_sync_events
+
+        events = radar_at_sync_events(state.recording_path(recording), state.spec)
+        return [{**e, "recording": recording} for e in events][:limit]
+    return [e.as_dict() for e in state.recorder.sync_events[-limit:]]
+
+
+@router.post("/api/recordings/start", tags=["control"], dependencies=CONTROL,
+             responses=responses(401, 403, 409, 503, 507))
+def rec_start(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
+    """Start a manual recording (507 when the disk has no room)."""
+    if state.acq.mode != "live":
+        raise ConflictError("cannot record while replaying")
+    try:
+        return {"recording": state.recorder.start("manual")}
+    except StorageError as exc:  # storage: 507 no room (ENOSPC, EDQUOT, EFBIG), else 503
+        raise HTTPException(state.recorder.http_status(exc), str(exc)) from exc
+
+
+@router.post("/api/recordings/stop", tags=["control"], dependencies=CONTROL,
+             responses=responses(401, 403))
+def rec_stop(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
+    """Close the open recording (``closed``: its id, or null)."""
+    return {"closed": state.recorder.stop()}

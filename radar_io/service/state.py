@@ -1,0 +1,196 @@
+"""The service's shared state: configuration, acquisition, recorder, history, hub, outputs.
+
+Built once by :func:`radar_io.service.app.build_app` (everything that can be refused
+is refused here, before the server binds), started and stopped by the app's lifespan
+(:meth:`ServiceState.start`, :meth:`ServiceState.stop`): the reader thread, the sink
+workers (TLM1, D/A) and the CAN air-data reader.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import secrets
+from pathlib import Path
+from typing import Any
+
+from radar_io import __version__
+from radar_io.decoding.biases import Calibration, load_calibration
+from radar_io.errors import ConfigError, NotFoundError, ValidationError
+from radar_io.coordinates.transforms import load_site
+from radar_io.recording.recorder import Recorder
+from radar_io.service.acquisition import Acquisition
+from radar_io.service.config import ServiceConfig
+from radar_io.service.history import History
+from radar_io.service.hub import Hub
+from radar_io.sources.replay import ReplaySource
+from radar_io.wirespec.frame import load_spec
+
+#: a recording or calibration id: a plain file name
+ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
+
+
+def check_id(value: str, what: str) -> str:
+    """``value`` if it is a plain name; ValidationError otherwise."""
+    if not ID_RE.match(value) or ".." in value:
+        raise ValidationError(f"{what} {value!r} must be a plain name (letters, digits, _ . -)")
+    return value
+
+
+class ServiceState:
+    """Everything the routers share (``request.app.state.service``)."""
+
+    def __init__(self, cfg: ServiceConfig) -> None:
+        self.cfg = cfg
+        self.token = cfg.token()
+        self.data_dir = Path(cfg.data_dir)
+        self.data_dir.mkdir(parents=True, exist_ok=True)
+        self.spec = load_spec(cfg.spec) if cfg.spec else load_spec()
+        site_path = cfg.resolved_site()
+        self.site = load_site(site_path) if site_path else None
+        self.cal_dir = self.data_dir / "calibrations"
+        self.cal_dir.mkdir(exist_ok=True)
+        cal = Calibration()
+        if cfg.calibration:
+            cal = load_calibration(cfg.calibration)
+        elif (self.cal_dir / "active.json").exists():
+            cal = load_calibration(self.cal_dir / "active.json")
+        self.history = History(int(cfg.history_mb * (1 << 20)))
+        self.hub = Hub(self.history, cfg.ws_queue_size, cfg.ws_max_clients,
+                       cfg.ws_batch_interval_s)
+        self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
+                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s,
+                                 retry_s=cfg.retry_s,  # storage: retry after a disk error
+                                 low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
+        self.runway_jobs: Any = None  # storage: RunwayJobs, created by the runway router
+        self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
+                               self.hub.publish_threadsafe, site=self.site, calibration=cal)
+        self.replay: ReplaySource | None = None
+        self.sinks: dict[str, Any] = {}       # name → SinkWorker (started in start())
+        self._sink_defs: dict[str, Any] = {}  # name → Sink, checked now, opened by its worker
+        self.air: Any = None
+        self._setup_outputs(cfg)
+        self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
+
+    def _setup_outputs(self, cfg: ServiceConfig) -> None:
+        """Reference path, TLM1 / D/A sinks and CAN air data, as configured; a configuration
+        that can never work is refused here, in one line."""
+        from radar_io.coordinates.deviation import DeviationProcessor
+        from radar_io.coordinates.reference_path import load_path
+
+        self.path = load_path(cfg.path) if cfg.path else None
+        if self.path is not None:
+            if self.path.frame == "runway" and self.site is None:
+                raise ConfigError("path: a runway-frame reference path needs a site (--site)")
+            self.acq.processors.append(DeviationProcessor(self.path))
+        if cfg.tlm_out and self.path is None:
+            raise ConfigError("tlm_out: TLM1 carries the path deviation (dy_m, dz_m): "
+                              "give a reference path (--path)")
+        if cfg.tlm_out:
+            from radar_io.encoding.tlm1 import TelemetryEncoder
+            from radar_io.sinks.uplink import TelemetrySink
+
+            enc = TelemetryEncoder(cycle_s=cfg.tlm_cycle_s or None)
+            self._sink_defs["tlm"] = TelemetrySink(cfg.tlm_out, enc)
+        if cfg.da_out:
+            from radar_io.sinks.uplink import DASink
+
+            self._sink_defs["da"] = DASink(cfg.da_out)
+        if cfg.asterix_out:  # interchange: ASTERIX CAT048 (sinks/asterix.py)
+            from radar_io.sinks.asterix import service_sink
+
+            self._sink_defs["asterix"] = service_sink(self, cfg.asterix_out)
+        self.mqtt: Any = None
+        if cfg.publish:  # interchange: MQTT track, status and sync events (sinks/mqtt.py)
+            from radar_io.sinks.mqtt import attach_to_service
+
+            self.mqtt = attach_to_service(self, cfg.publish, username=cfg.mqtt_user,
+                                          password=cfg.mqtt_password, ca_file=cfg.mqtt_ca_file)
+        if cfg.can:
+            from radar_io.sources.airdata import AirDataReader
+
+            interface, channel = cfg.can.split(":", 1)
+            self.air = AirDataReader(interface, channel, self.latest_radar, cfg.can_bitrate)
+
+    # -- lifespan ---------------------------------------------------------------------------
+    def start(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Start the workers: sinks (they open and reopen their targets), air data, reader."""
+        from radar_io.sinks.worker import SinkWorker
+
+        self.hub.attach(loop)
+        for name, sink in self._sink_defs.items():
+            w = SinkWorker(name, sink)
+            self.sinks[name] = w
+            self.acq.processors.append(w.submit)
+        if self.air is not None:
+            self.air.start()
+        if self.mqtt is not None:
+            self.mqtt.start()  # never waits for the broker
+        self.acq.start()
+
+    def stop(self) -> None:
+        """Stop the reader, close the recording, stop the sinks and the air-data reader."""
+        self.acq.stop()
+        self.recorder.close()
+        if self.runway_jobs is not None:  # storage: cancel runway jobs, remove their spool
+            self.runway_jobs.close()
+        for w in self.sinks.values():
+            w.close()
+        if self.mqtt is not None:
+            self.mqtt.close()  # last word on PREFIX/status: {"online": false}
+        if self.air is not None:
+            self.air.close()
+
+    # -- helpers for the routers ------------------------------------------------------------
+    def latest_radar(self) -> dict[str, Any] | None:
+        return self.history.latest_message
+
+    def path_polyline(self, step_m: float = 50.0) -> dict[str, Any] | None:
+        """The reference path sampled every ``step_m`` in the radar frame (for drawing)."""
+        import numpy as np
+
+        if self.path is None:
+            return None
+        from radar_io.coordinates.transforms import runway_to_radar
+
+        s = np.append(np.arange(0.0, self.path.length_m, step_m), self.path.length_m)
+        x, y, h = self.path.position(s)
+        if self.path.frame == "runway":
+            x, y, h = runway_to_radar(x, y, h, self.site)
+        return {"frame": self.path.frame, "length_m": float(self.path.length_m),
+                "x_m": np.round(x, 2).tolist(), "y_m": np.round(y, 2).tolist(),
+                "h_m": np.round(h, 2).tolist()}
+
+    def recording_path(self, rec_id: str) -> Path:
+        """The ``.rdrlog`` of a recording id; ValidationError for a bad id, NotFoundError."""
+        check_id(rec_id, "recording id")
+        base = self.recorder.dir.resolve()
+        p = (base / f"{rec_id}.rdrlog").resolve()
+        if p.parent != base:
+            raise ValidationError("path outside the data directory refused")
+        if not p.is_file():
+            raise NotFoundError(f"no recording {rec_id!r}")
+        return p
+
+    def status(self) -> dict[str, Any]:
+        st = self.acq.status()
+        st.update(self.hub.stats())
+        st["recording"] = self.recorder.current
+        st["storage"] = self.recorder.storage()  # storage: free_bytes, low_space, last_error
+        st["auto_record"] = self.recorder.auto
+        st["calibration"] = self.acq.calibration.id
+        st["control_enabled"] = self.token is not None
+        st["replay"] = self.replay.state() if self.replay is not None and st["mode"] == "replay" \
+            else None
+        st["site"] = self.site.name if self.site else None
+        st["version"] = __version__
+        st["instance"] = self.instance
+        st["path"] = self.cfg.path
+        st["uplink"] = {k: w.stats() for k, w in self.sinks.items()}
+        st["publish"] = {"mqtt": self.mqtt.stats()} if self.mqtt is not None else {}
+        st["airdata"] = self.air.stats() if self.air is not None else None
+        return st
+
+
+#: the old name
+Service = ServiceState

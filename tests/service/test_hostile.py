@@ -1,0 +1,132 @@
+"""Hostile pages and hostile requests against a real ``radar-io serve`` on port 0:
+foreign Origins, oversized headers and bodies, control without the token, too many
+websocket clients; and the batched websocket stream."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import urllib.error
+import urllib.request
+
+import pytest
+import websockets
+from websockets.exceptions import ConnectionClosed, InvalidStatus
+
+from radar_io.benchmarks.service_load import ServeProcess
+
+TOKEN = "hostile-test-token"
+
+
+@pytest.fixture(scope="module")
+def svc(tmp_path_factory):
+    d = tmp_path_factory.mktemp("hostile")
+    cfg = d / "serve.toml"
+    cfg.write_text('ws_max_clients = 3\nallowed_origins = ["https://radar.example.org"]\n'
+                   'max_body_kb = 64\nmax_header_kb = 8\nauto_record = "manual"\n')
+    s = ServeProcess("sim://", d / "data", extra=("--config", str(cfg)),
+                     env={"RADAR_IO_TOKEN": TOKEN})
+    try:
+        s.wait_ready()
+        yield s
+    finally:
+        s.stop()
+
+
+def request(svc, method: str, path: str, body: bytes | None = None,
+            headers: dict[str, str] | None = None) -> tuple[int, dict, dict]:
+    req = urllib.request.Request(svc.base + path, method=method, data=body, headers=headers or {})
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, dict(r.headers), json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as e:
+        return e.code, dict(e.headers), json.loads(e.read() or b"null")
+
+
+def reasons(doc: dict) -> str:
+    assert isinstance(doc["detail"], list)
+    return "; ".join(d["msg"] for d in doc["detail"])
+
+
+def test_a_foreign_origin_is_refused_on_the_api(svc):
+    code, _, doc = request(svc, "GET", "/api/status", headers={"Origin": "https://evil.example"})
+    assert code == 403 and "evil.example" in reasons(doc)
+    for ok in (f"http://127.0.0.1:{svc.port}", "https://radar.example.org"):
+        code, _, doc = request(svc, "GET", "/api/status", headers={"Origin": ok})
+        assert code == 200 and doc["connected"], ok
+    assert request(svc, "GET", "/api/status")[0] == 200  # no Origin: not a browser
+
+
+def test_a_foreign_origin_cannot_open_the_live_websocket(svc):
+    url = f"ws://127.0.0.1:{svc.port}/ws/live"
+
+    async def main() -> None:
+        with pytest.raises(InvalidStatus) as e:
+            async with websockets.connect(url, origin="https://evil.example"):
+                pass
+        assert e.value.response.status_code == 403
+        async with websockets.connect(url, origin=f"http://127.0.0.1:{svc.port}") as ws:
+            assert "msg_seq" in json.loads(await ws.recv())
+
+    asyncio.run(main())
+
+
+def test_oversized_headers_431_and_bodies_413(svc):
+    code, _, doc = request(svc, "GET", "/api/status", headers={"X-Padding": "a" * 10_000})
+    assert code == 431 and "headers" in reasons(doc)
+    big = json.dumps({"id": "x", "biases": {}, "pad": "a" * 70_000}).encode()
+    code, _, doc = request(svc, "PUT", "/api/calibration", big,
+                           {"Authorization": f"Bearer {TOKEN}", "Content-Type": "application/json"})
+    assert code == 413 and "65536" in reasons(doc)
+
+
+def test_every_control_endpoint_needs_the_token(svc):
+    api = request(svc, "GET", "/openapi.json")[2]
+    # pure computations change nothing and need no token: coordinates, the manual runway
+    # pose; the runway upload's token is tested in test_runway_routes.py
+    free = ("/api/runway", "/api/coordinates/")
+    control = [(m.upper(), p) for p, ops in api["paths"].items() for m in ops
+               if m in ("post", "put", "delete", "patch") and not p.startswith(free)]
+    assert len(control) >= 11
+    for method, path in control:
+        code, hdr, doc = request(svc, method, path, b"{}", {"Content-Type": "application/json"})
+        assert code == 401 and hdr.get("www-authenticate", hdr.get("WWW-Authenticate")) == "Bearer", \
+            (method, path, doc)
+        code, _, doc = request(svc, method, path, b"{}", {"Content-Type": "application/json",
+                                                          "Authorization": "Bearer nope"})
+        assert code == 403 and reasons(doc) == "wrong token", (method, path)
+        assert "401" in api["paths"][path][method.lower()]["responses"], (method, path)
+
+
+def test_405_names_the_allowed_methods(svc):
+    code, hdr, doc = request(svc, "DELETE", "/api/status")
+    assert code == 405 and hdr.get("allow", hdr.get("Allow")) == "GET" and reasons(doc)
+
+
+def test_batch_stream_sends_arrays_and_extra_clients_are_refused(svc):
+    url = f"ws://127.0.0.1:{svc.port}/ws/live"
+
+    async def main() -> tuple[list[int], int | None]:
+        async with websockets.connect(url + "?batch=1", max_size=None) as ws1, \
+                websockets.connect(url) as ws2, websockets.connect(url) as ws3:
+            seqs: list[int] = []
+            frames = 0
+            while len(seqs) < 2000:
+                arr = json.loads(await ws1.recv())
+                assert isinstance(arr, list) and arr
+                frames += 1
+                seqs += [m["msg_seq"] for m in arr]
+            assert frames < len(seqs) / 2  # several messages per websocket frame
+            assert "msg_seq" in json.loads(await ws2.recv()) and await ws3.recv()
+            async with websockets.connect(url) as ws4:  # the fourth: refused
+                try:
+                    await asyncio.wait_for(ws4.recv(), 5)
+                except ConnectionClosed as exc:
+                    return seqs, exc.rcvd.code if exc.rcvd else None
+        return seqs, None
+
+    seqs, code = asyncio.run(main())
+    assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))
+    assert code == 1013
+    st = json.loads(urllib.request.urlopen(svc.base + "/api/status", timeout=5).read())
+    assert st["ws_refused"] >= 1

@@ -1,0 +1,60 @@
+"""``serve`` refuses a bad configuration at start: exit code 2 and one line naming the
+file and the field; a configuration that can never work (TLM1 without a path) too."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from radar_io.errors import ConfigError
+from radar_io.service.config import load_config
+
+
+def serve(tmp_path, *args: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "RADAR_IO_TOKEN"}
+    return subprocess.run([sys.executable, "-m", "radar_io.cli", "serve", "--port", "0",
+                           "--data-dir", str(tmp_path / "d"), *args], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.parametrize("text,field,words", [
+    ("prot = 8000\n", "prot", "unknown key"),
+    ('port = "8000"\n', "port", "valid integer"),
+    ("port = 70000\n", "port", "less than or equal to 65535"),
+    ("history_mb = 0\n", "history_mb", "greater than 0"),
+    ('auto_record = "sometimes"\n', "auto_record", "'go', 'manual' or 'always'"),
+    ('allowed_origins = "https://a.example"\n', "allowed_origins", "valid array"),
+    ("ws_max_clients = 2.5\n", "ws_max_clients", "integer"),
+    ('can = "can0"\n', "can", "interface:channel"),
+])
+def test_a_bad_config_file_is_one_line_naming_the_file_and_field(tmp_path, text, field, words):
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_config(str(cfg), {})
+    msg = str(e.value)
+    assert str(cfg) in msg and repr(field) in msg and words in msg and "\n" not in msg
+    r = serve(tmp_path, "--config", str(cfg))
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and str(cfg) in lines[0] and field in lines[0], r.stderr
+
+
+def test_a_good_config_file_and_overrides(tmp_path):
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text('port = 0\nhistory_mb = 8\nallowed_origins = ["https://a.example"]\n')
+    c = load_config(str(cfg), {"port": 1234, "host": None})
+    assert (c.port, c.history_mb, c.allowed_origins, c.host) == (1234, 8.0, ["https://a.example"],
+                                                                 "127.0.0.1")
+    with pytest.raises(ConfigError, match="'port'"):
+        load_config(str(cfg), {"port": -1})
+
+
+def test_tlm1_without_a_path_is_refused_at_start(tmp_path):
+    r = serve(tmp_path, "--tlm-out", "udp://127.0.0.1:9")
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "tlm_out" in lines[0] and "--path" in lines[0], r.stderr
