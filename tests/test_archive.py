@@ -213,3 +213,28 @@ def test_doc_queries_crc_errors_per_day(archived):
     assert rows == [("range-a", "2026-05-01", day1),
                     ("range-a", "2026-05-02", ref["flight-3"].stats["crc_errors"])]
     assert day1 > 0
+
+
+def test_a_damaged_recording_is_one_line_and_the_others_are_archived(campaign, tmp_path):
+    d, _ = campaign
+    recs = tmp_path / "recs"
+    recs.mkdir()
+    good = recs / "good.rdrlog"
+    good.write_bytes((d / "recordings" / "flight-2.rdrlog").read_bytes())
+    bad = recs / "bad.rdrlog"
+    data = bytearray(good.read_bytes())
+    data[20] ^= 0xFF  # inside the JSON header: its CRC fails
+    bad.write_bytes(bytes(data))
+    out = tmp_path / "archive"
+    r = run_cli("archive", str(recs), "--out", str(out), "-q")
+    err = r.stderr.decode().strip().splitlines()
+    assert r.returncode == 2
+    assert len(err) == 2 and "bad.rdrlog" in err[0] and "header" in err[0], err
+    assert err[1] == "radar-io archive: 1 written, 0 up to date, 1 failed"
+    files = [p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file()]
+    assert files == ["site=unknown/date=2026-05-01/recording=good/part-0.parquet"]
+    from radar_io.recording.rdrlog import RecordingReader
+
+    with RecordingReader(good) as rd:
+        want = len(decode_bytes(b"".join(c.data for c in rd)))
+    assert pq.read_metadata(out / files[0]).num_rows == want > 0

@@ -4,7 +4,6 @@ order, file metadata, atomic files (no output left after an error or a kill)."""
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 import os

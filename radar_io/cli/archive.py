@@ -26,7 +26,8 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from radar_io.analysis.archive import archive
+    from radar_io.analysis.archive import archive_recording, find_recordings
+    from radar_io.errors import RadarIOError
 
     common = load_common(args)
     ref = None
@@ -39,9 +40,16 @@ def run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         site = replace(common["site"], name=args.site_name)
-    written = skipped = 0
-    for res in archive(args.inputs, args.out, site=site, spec=common["spec"],
-                       calibration=common["calibration"], reference_path=ref, force=args.force):
+    written = skipped = failed = 0
+    for rec in find_recordings(args.inputs):
+        try:
+            res = archive_recording(rec, args.out, site=site, spec=common["spec"],
+                                    calibration=common["calibration"], reference_path=ref,
+                                    force=args.force)
+        except RadarIOError as exc:  # one bad recording never stops the others
+            print(f"radar-io archive: error: {exc}", file=sys.stderr)
+            failed += 1
+            continue
         for problem in res.problems:
             print(f"radar-io archive: warning: {res.source}: {problem}", file=sys.stderr)
         if res.written:
@@ -52,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
             what = "written" if res.written else "up to date"
             counts = ", ".join(f"{k} {v}" for k, v in res.stats.items())
             print(f"{res.path}: {what}: {counts}", file=sys.stderr)
-    if not args.quiet:
-        print(f"radar-io archive: {written} written, {skipped} up to date", file=sys.stderr)
-    return 0
+    if not args.quiet or failed:
+        print(f"radar-io archive: {written} written, {skipped} up to date"
+              + (f", {failed} failed" if failed else ""), file=sys.stderr)
+    return 2 if failed else 0

@@ -43,10 +43,6 @@ def column_unit(name: str) -> str:
     return "1"
 
 
-def _arrow_type(a: np.ndarray) -> pa.DataType:
-    return pa.from_numpy_dtype(a.dtype)
-
-
 def arrow_schema(columns: Sequence[str], dtypes: Mapping[str, np.dtype],
                  metadata: Mapping[str, str] | None = None) -> pa.Schema:
     """The schema of a table of ``columns`` (numpy ``dtypes``), units in field metadata."""
