@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -30,6 +31,14 @@ class MeasurementBatch:
 
     def keys(self) -> tuple[str, ...]:
         return self.columns
+
+    def to_arrow(self, metadata: Mapping[str, str] | None = None) -> Any:
+        """A :class:`pyarrow.RecordBatch` of the columns in decode order, zero-copy from numpy
+        where the dtype allows; units in each field's metadata, NaN (no value) as null.
+        ``metadata`` goes into the schema as ``radar_io.<key>``. Imports pyarrow."""
+        from radar_io.sinks.arrow_table import batch_to_arrow
+
+        return batch_to_arrow(self, metadata)
 
     def __repr__(self) -> str:
         return f"MeasurementBatch({len(self)} rows, stats={self.stats})"

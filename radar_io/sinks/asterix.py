@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import os
 import sys
-import tempfile
 from typing import IO, Any
 
-from radar_io.errors import ConfigError, StorageError
+from radar_io.errors import StorageError
 
 from radar_io.encoding.asterix_cat048 import Cat048Encoder
+from radar_io.sinks.atomic import AtomicFile
 from radar_io.sinks.base import Batch, EncoderSink, Sink
 
 
@@ -66,7 +66,7 @@ class AsterixFileWriter(Sink):
         self.encoder = encoder or (Cat048Encoder.for_site(site, **options) if site is not None
                                    else Cat048Encoder(**options))
         self._out: IO[bytes] | None = None
-        self._tmp: str | None = None
+        self._atomic: AtomicFile | None = None
         self.bytes = 0
         #: what decode adds at the end for the table formats; ASTERIX has no place for it
         self.final_metadata: dict[str, str] = {}
@@ -77,14 +77,8 @@ class AsterixFileWriter(Sink):
         if self.target == "-":
             self._out = sys.stdout.buffer
             return
-        directory = os.path.dirname(os.path.abspath(self.target))
-        try:
-            fd, self._tmp = tempfile.mkstemp(prefix=f".{os.path.basename(self.target)}.",
-                                             suffix=".part", dir=directory)
-        except OSError as exc:
-            raise ConfigError(f"cannot write {self.target}: {exc.strerror}") from exc
-        os.fchmod(fd, 0o644)  # as the table writers (mkstemp makes 0600)
-        self._out = os.fdopen(fd, "wb", buffering=1 << 20)
+        self._atomic = AtomicFile(self.target)  # the table writers' temporary-name file
+        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)
 
     def write(self, batch: Batch) -> int:
         if self._out is None:
@@ -101,38 +95,31 @@ class AsterixFileWriter(Sink):
     def close(self) -> None:
         """Flush and give the file its name (StorageError if the disk fails)."""
         out, self._out = self._out, None
-        if out is None or self._tmp is None:
-            if out is not None:
-                out.flush()
+        atomic, self._atomic = self._atomic, None
+        if out is None:
+            return
+        if atomic is None:  # stdout
+            out.flush()
             return
         try:
-            out.flush()
-            os.fsync(out.fileno())
             out.close()
-            os.replace(self._tmp, self.target)
         except OSError as exc:
-            self._discard()
+            atomic.abort()
             raise StorageError(f"cannot write {self.target}: {exc.strerror}",
                                errno=exc.errno) from exc
-        self._tmp = None
+        atomic.commit()
 
     def abort(self) -> None:
         """Drop the unfinished file; never raises."""
         out, self._out = self._out, None
-        if out is not None and self._tmp is not None:
+        atomic, self._atomic = self._atomic, None
+        if out is not None and atomic is not None:
             try:
                 out.close()
             except OSError:
                 pass
-        self._discard()
-
-    def _discard(self) -> None:
-        if self._tmp is not None:
-            try:
-                os.unlink(self._tmp)
-            except OSError:
-                pass
-            self._tmp = None
+        if atomic is not None:
+            atomic.abort()
 
     def __exit__(self, exc_type: object, *exc: object) -> None:
         if exc_type is None:
