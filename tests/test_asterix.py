@@ -221,3 +221,20 @@ def test_site_sac_sic_reach_the_records_and_sac_over_255_is_one_line(tmp_path):
                   str(tmp_path / "x.csv"))
     err = res.stderr.decode().strip()
     assert res.returncode == 2 and "\n" not in err and "sac" in err and "300" in err, err
+
+
+def test_decode_cli_writes_ast_from_the_extension(tmp_path):
+    """`radar-io decode INPUT -o OUT.ast`: one CAT048 record per valid sample (GO and RX_GOOD),
+    SAC/SIC from the site, values equal to the decoded batch within one LSB."""
+    raw = tmp_path / "capture.bin"
+    raw.write_bytes(RadarSimulator(FlightScript(), SimConfig(seed=9)).generate(4000)[0])
+    site_toml = _site_toml(tmp_path, 7)
+    res = run_cli("decode", str(raw), "--site", site_toml, "-o", str(tmp_path / "out.ast"), "-q")
+    assert res.returncode == 0, res.stderr
+    got = decode_records((tmp_path / "out.ast").read_bytes())
+    batch = decode_bytes(raw.read_bytes(), site=load_site(site_toml))
+    valid = (batch["go"] == 1) & (batch["rx_good"] == 1)
+    assert len(got["sac"]) == int(valid.sum()) > 1000
+    assert (got["sac"] == 7).all() and (got["sic"] == 17).all()
+    assert np.abs(got["sr_m"] - batch["sr_c_m"][valid]).max() <= 1852.0 / 256
+    assert not list(tmp_path.glob(".out.ast.*"))  # no temporary file left

@@ -17,14 +17,15 @@ CHUNK_BYTES = 1 << 20
 
 def add_subparser(sub: Any) -> None:
     p = sub.add_parser("decode", help="decode a raw capture or .rdrlog to CSV, JSON lines, "
-                       "Parquet or Arrow",
+                       "Parquet, Arrow or ASTERIX CAT048",
                        description="Decode RDR1 frames from a raw capture (any bytes) or a "
                        ".rdrlog recording; one row per accepted frame. The output is written "
                        "under a temporary name and renamed when complete.")
     p.add_argument("input", metavar="INPUT", help="raw capture or .rdrlog ('-' for stdin)")
     p.add_argument("-o", "--output", metavar="OUT", help="output file (default stdout)")
-    p.add_argument("--format", choices=("csv", "jsonl", "parquet", "arrow"),
-                   help="default from OUT's extension (.csv .jsonl .parquet .arrow), else csv")
+    p.add_argument("--format", choices=("csv", "jsonl", "parquet", "arrow", "ast"),
+                   help="default from OUT's extension (.csv .jsonl .parquet .arrow .ast), "
+                   "else csv; ast = ASTERIX CAT048 data blocks (SAC/SIC from --site)")
     p.add_argument("--stats", metavar="STATS.json", help="write the framer counters here")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.add_argument("--path", metavar="PATH", help="reference path TOML: adds dy_m,dz_m,along_m,leg")
@@ -40,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from radar_io.decoding.decoders import iter_decode
     from radar_io.coordinates.reference_path import add_deviation
     from radar_io.cli.progress import Progress
-    from radar_io.sinks import open_table
+    from radar_io.sinks import open_sink, open_table
     from radar_io.sinks.arrow_table import output_metadata
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
 
@@ -60,7 +61,10 @@ def run(args: argparse.Namespace) -> int:
         chunks = iter_payloads(args.input, chunk_bytes=CHUNK_BYTES,
                                progress=lambda d, t: _progress(progress, d, t, state),
                                report=report)
-    writer = open_table(args.output or "-", args.format, metadata=meta)
+    if args.format == "ast" or (args.format is None and (args.output or "").lower().endswith(".ast")):
+        writer = open_sink("ast", args.output or "-", site=common["site"])
+    else:
+        writer = open_table(args.output or "-", args.format, metadata=meta)
     stats: dict[str, int] = {}
     old_term = _terminate_as_interrupt()
     try:
