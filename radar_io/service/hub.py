@@ -27,6 +27,10 @@ from starlette.websockets import WebSocket
 from radar_io.service.history import History
 
 
+#: a one-message-per-frame client yields to the loop after this many sends
+YIELD_EVERY = 16
+
+
 class Block:
     """Messages published together: shared, immutable, the array text built once."""
 
@@ -84,11 +88,17 @@ class Client:
             return
         if self.batch:
             await self._send_text("[" + ",".join(t for _, t in items) + "]")
-        else:
-            for _, text in items:
-                await self._send_text(text)
-        self.last_sent = items[-1][0]
-        self.sent += len(items)
+            self.last_sent = items[-1][0]
+            self.sent += len(items)
+            return
+        for k, (seq, text) in enumerate(items):
+            await self._send_text(text)
+            self.last_sent = seq
+            self.sent += 1
+            if k % YIELD_EVERY == YIELD_EVERY - 1:
+                await asyncio.sleep(0)  # a send that does not block never yields: take turns
+                if self.queued > self.queue_size:  # fallen behind meanwhile: skip ahead
+                    return
 
     async def _send_block(self, b: Block) -> None:
         if b.last <= self.last_sent:
@@ -152,6 +162,8 @@ class Hub:
         self.clients: set[Client] = set()
         self.loop: asyncio.AbstractEventLoop | None = None
         self.refused = 0
+        self.undispatched = 0  #: messages dropped before dispatch (loop overloaded)
+        self.max_pending = max(10 * queue_size, 20000)
         self._dropped_closed = 0
         self._pending: list[tuple[int, str]] = []
         self._lock = threading.Lock()
@@ -168,6 +180,10 @@ class Hub:
             return
         with self._lock:
             self._pending.extend(items)
+            over = len(self._pending) - self.max_pending
+            if over > 0:  # the loop is not dispatching (overloaded): keep the newest only
+                del self._pending[:over]
+                self.undispatched += over
             if self._scheduled:
                 return
             self._scheduled = True
@@ -205,7 +221,8 @@ class Hub:
 
     @property
     def dropped(self) -> int:
-        return self._dropped_closed + sum(c.dropped for c in self.clients)
+        return self._dropped_closed + sum(c.dropped for c in self.clients) + \
+            self.undispatched * len(self.clients)
 
     def stats(self) -> dict[str, Any]:
         return {"ws_clients": len(self.clients), "ws_dropped": self.dropped,
