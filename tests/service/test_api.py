@@ -28,9 +28,11 @@ def svc(tmp_path_factory):
     s = ServeProcess("sim://?go_delay_s=0.5&sync_every_s=1", d / "data",
                      env={"RADAR_IO_TOKEN": TOKEN})
     s.data = d / "data"
-    s.wait_ready()
-    yield s
-    s.stop()
+    try:  # stopped even when it never became ready
+        s.wait_ready()
+        yield s
+    finally:
+        s.stop()
 
 
 def msg(doc) -> str:

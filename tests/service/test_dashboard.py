@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 import time
 
-from radar_io.benchmarks.service_load import Pty, ServeProcess, free_port
+from radar_io.benchmarks.service_load import Pty, ServeProcess
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 
 from .cdp import Chrome
@@ -41,10 +41,10 @@ class Writer(threading.Thread):
 
 def test_dashboard_track_lamps_stale_and_recovery(tmp_path):
     pty = Pty()
-    port = free_port()
     writer = Writer(pty)
     writer.start()
-    svc = ServeProcess(pty.path, tmp_path / "data", port=port)
+    svc = ServeProcess(pty.path, tmp_path / "data")  # port 0: the port serve prints
+    port = svc.port
     chrome = Chrome(tmp_path / "chrome")
     try:
         svc.wait_ready()
