@@ -84,6 +84,9 @@ class ServiceState:
         if cfg.tlm_out and self.path is None:
             raise ConfigError("tlm_out: TLM1 carries the path deviation (dy_m, dz_m): "
                               "give a reference path (--path)")
+        if cfg.da_out and self.path is None:
+            raise ConfigError("da_out: D/A channels 6-7 carry the path deviation (dy_m, dz_m): "
+                              "give a reference path (--path)")
         if cfg.tlm_out:
             from radar_io.encoding.tlm1 import TelemetryEncoder
             from radar_io.sinks.uplink import TelemetrySink
