@@ -16,9 +16,9 @@ _LAZY: dict[str, str] = {
     "Calibration": "radar_io.decoding.biases",
     "load_calibration": "radar_io.decoding.biases",
     "save_calibration": "radar_io.decoding.biases",
-    "MeasurementBatch": "radar_io.decoding.decoders",
-    "decode_bytes": "radar_io.decoding.decoders",
-    "iter_decode": "radar_io.decoding.decoders",
+    "MeasurementBatch": "radar_io.decoding.measurement",
+    "decode_bytes": "radar_io.decoding.batch_decoder",
+    "iter_decode": "radar_io.decoding.batch_decoder",
     "open_source": "radar_io.sources",
     "open_sink": "radar_io.sinks",
 }
@@ -29,7 +29,8 @@ _LAZY.update({name: "radar_io.errors" for name in _ERRORS})
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
     from radar_io.decoding.biases import Calibration, load_calibration, save_calibration
-    from radar_io.decoding.decoders import MeasurementBatch, decode_bytes, iter_decode
+    from radar_io.decoding.batch_decoder import decode_bytes, iter_decode
+    from radar_io.decoding.measurement import MeasurementBatch
     from radar_io.errors import *  # noqa: F403
     from radar_io.sinks import open_sink
     from radar_io.sources import open_source

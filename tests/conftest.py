@@ -1,7 +1,16 @@
+"""Shared test fixtures. Tests read only files inside the repository (``tests/data/``,
+``firmware_specs/``); nothing beside the clone.
+
+Outside programs (chromium, mosquitto, tshark, ...): :func:`require_program` skips a test
+with the reason locally; with ``CI=true`` in the environment any skipped test fails the
+session (see :func:`pytest_sessionfinish`), so CI cannot go green on tests that never ran.
+"""
+
 from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -9,8 +18,58 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared"
+DATA = Path(__file__).resolve().parent / "data"
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def in_ci() -> bool:
+    """True when the environment says this is a CI run (``CI=true``)."""
+    return os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+
+
+def require_program(name: str, *alternatives: str) -> str:
+    """Full path of the first of ``name, *alternatives`` found on PATH; skip the test with
+    the reason when none is (in CI the skip then fails the session)."""
+    for n in (name, *alternatives):
+        p = shutil.which(n)
+        if p:
+            return p
+    names = " / ".join((name, *alternatives))
+    pytest.skip(f"outside program {names} is not installed (Debian package; .ci/run installs it)")
+    raise AssertionError("unreachable")  # pytest.skip raises
+
+
+_skipped: list[str] = []
+
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if report.skipped and not hasattr(report, "wasxfail"):   # an expected failure is no skip
+        _skipped.append(report.nodeid)
+
+
+def pytest_collectreport(report: pytest.CollectReport) -> None:
+    if report.skipped:
+        _skipped.append(report.nodeid or "collection")
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """With ``CI=true``, a session that skipped anything fails (exit 1)."""
+    if not in_ci():
+        return
+    tr = session.config.pluginmanager.get_plugin("terminalreporter")
+
+    def say(msg: str, **markup: bool) -> None:
+        if tr is not None:
+            tr.write_line(msg, **markup)
+        else:
+            print(msg, file=sys.stderr)
+
+    bad = list(_skipped)
+    if bad and session.exitstatus == 0:
+        say(f"CI=true: {len(bad)} test(s) skipped, which CI does not allow: "
+            + ", ".join(bad[:10]) + (" ..." if len(bad) > 10 else ""), red=True)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 @pytest.fixture(scope="session")
@@ -22,8 +81,8 @@ def spec():
 
 @pytest.fixture(scope="session")
 def vectors() -> dict:
-    path = SHARED / "vectors" / "rdr1_vectors.json"
-    return json.loads(path.read_text())
+    """Outside RDR1 test vectors (copied into tests/data/, see tests/data/README.md)."""
+    return json.loads((DATA / "rdr1_vectors.json").read_text(encoding="utf-8"))
 
 
 def run_cli(*args: str, input: bytes | None = None, timeout: float = 300,

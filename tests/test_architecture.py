@@ -26,7 +26,10 @@ def test_import_radar_io_loads_no_heavy_library():
 
 
 def test_lazy_attributes_resolve_and_unknown_names_fail():
-    assert radar_io.decode_bytes.__module__ == "radar_io.decoding.decoders"
+    from radar_io.decoding import decoders
+
+    assert radar_io.decode_bytes is decoders.decode_bytes
+    assert radar_io.decode_bytes.__module__ == "radar_io.decoding.batch_decoder"
     assert issubclass(radar_io.SourceError, radar_io.RadarIOError)
     with pytest.raises(AttributeError):
         radar_io.no_such_name  # noqa: B018

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +20,15 @@ EXACT = ("seq", "tod_s", "sr_m", "dsr_m", "el_deg", "del_deg", "az_deg", "daz_de
          "go", "rx_good", "sync", "sr_c_m", "el_c_deg", "az_c_deg", "auto", "servo_bw", "status_raw")
 VEC_KEYS = {"sr_c": "sr_c_m", "el_c": "el_c_deg", "az_c": "az_c_deg", "x": "x_m", "y": "y_m",
             "h": "h_m"}
+
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+@pytest.fixture(scope="module")
+def vectors() -> dict:
+    """The shared RDR1 vectors, copied into tests/data (see tests/data/README.md)."""
+    return json.loads((DATA / "rdr1_vectors.json").read_text())
 
 
 def _same(got, want, tol: float = 0.0) -> bool:
@@ -175,3 +186,141 @@ def test_batch_decoder_accepts_blocks_and_set_calibration(spec):
     dec.set_calibration(Calibration(dsr_m=2.0))
     b = dec.decode(np.concatenate(blocks))
     assert np.array_equal(b["sr_c_m"], a["sr_c_m"] + 2.0)
+
+
+# ---------------------------------------------------------------- chunked decode
+GOLDEN = DATA / "rdr1_golden.npz"
+
+
+@pytest.fixture(scope="module")
+def golden():
+    with np.load(GOLDEN) as z:
+        return {k: z[k] for k in z.files}
+
+
+@pytest.mark.parametrize("block_frames", [65536, 1000, 7, 3])
+@pytest.mark.parametrize("name", ["clean", "damaged"])
+def test_decode_bytes_reproduces_the_previous_decoder_exactly(golden, name, block_frames):
+    """Columns, dtypes, column order and counters as main's decoder gave them (tests/data)."""
+    import json
+
+    from radar_io.decoding.biases import Calibration
+
+    data = golden[f"input_{name}"].tobytes()
+    for cname, cal in (("nocal", None), ("cal", Calibration(dsr_m=2.5, del_deg=-0.013, daz_deg=0.021))):
+        b = decode_bytes(data, cal, block_frames=block_frames)
+        key = f"{name}/{cname}"
+        assert list(b.columns) == json.loads(str(golden[f"{key}/columns"]))
+        assert b.stats == json.loads(str(golden[f"{key}/stats"]))
+        for col in b.columns:
+            want = golden[f"{key}/{col}"]
+            assert b[col].dtype == want.dtype, col
+            assert np.array_equal(b[col], want, equal_nan=want.dtype.kind == "f"), col
+
+
+def _per_frame(data: bytes, spec):
+    from radar_io.framing.core import Framer
+
+    f, dec = Framer(spec), FrameDecoder(spec)
+    rows = [dec.decode(fr) for fr in f.feed(data)]
+    f.flush()
+    return rows, f.stats.as_dict()
+
+
+def _same_rows(batch_cols: dict, rows: list[dict]) -> None:
+    n = len(rows)
+    for col, v in batch_cols.items():
+        assert len(v) == n, col
+        want = np.array([np.nan if r[col] is None else r[col] for r in rows], dtype=np.float64)
+        tol = 1e-6 if col in ("x_m", "y_m", "h_m") else 0.0
+        assert np.allclose(v.astype(np.float64), want, rtol=0, atol=tol, equal_nan=True), col
+
+
+def test_iter_decode_every_split_point_of_a_damaged_stream(spec, golden):
+    """Two chunks split at every byte, tiny blocks: same frames and counters as the per-frame path."""
+    from radar_io.decoding.batch_decoder import BatchDecoder, iter_decode
+
+    data = golden["input_damaged"].tobytes()[:24 * 60]
+    rows, stats = _per_frame(data, spec)
+    assert stats["crc_errors"] > 0 and stats["frames"] > 20          # really damaged
+    dec = BatchDecoder(spec)
+    for k in range(len(data) + 1):
+        batches = list(iter_decode([data[:k], data[k:]], block_frames=7, decoder=dec))
+        assert all(1 <= len(b) <= 7 for b in batches[:-1]) and len(batches[-1]) == 0
+        assert batches[-1].stats == stats, k
+        cols = {c: np.concatenate([b[c] for b in batches]) for c in batches[0].columns}
+        assert [int(s) for s in cols["seq"]] == [r["seq"] for r in rows], k
+        if k % 97 == 0:                                  # every column, on a sample of the splits
+            _same_rows(cols, rows)
+
+
+@pytest.mark.parametrize("block_frames", [1, 5, 24, 1000])
+def test_decode_bytes_every_block_split_of_a_damaged_stream(spec, golden, block_frames):
+    """Block boundaries fall at every phase of the frames: nothing lost, nothing doubled."""
+    data = golden["input_damaged"].tobytes()[:24 * 400]
+    rows, stats = _per_frame(data, spec)
+    for shift in range(0, 24, 5):                  # move every boundary inside the frames
+        b = decode_bytes(data[shift:], block_frames=block_frames)
+        want_rows, want_stats = _per_frame(data[shift:], spec)
+        assert b.stats == want_stats
+        _same_rows({c: b[c] for c in b.columns}, want_rows)
+    assert decode_bytes(data, block_frames=block_frames).stats == stats
+
+
+def test_iter_decode_yields_each_chunk_before_reading_the_next():
+    """A live source (a pipe, a serial port): frames come out as soon as their chunk is in."""
+    from radar_io.decoding.batch_decoder import iter_decode
+
+    frames = [independent.frame(seq=i, sr=100 + i, sts=5) for i in range(10)]
+    read = []
+
+    def live():
+        for i in range(0, 10, 3):
+            read.append(i)
+            yield b"".join(frames[i:i + 3])
+
+    for batch in iter_decode(live(), block_frames=65536):
+        if len(batch):
+            assert batch["seq"].tolist() == list(range(read[-1], min(read[-1] + 3, 10)))
+    assert batch.stats["frames"] == 10 and len(batch) == 0
+
+
+def test_iter_decode_takes_bytes_paths_files_and_chunk_iterables(tmp_path, golden):
+    from radar_io.decoding.batch_decoder import iter_decode
+
+    data = golden["input_damaged"].tobytes()
+    want = decode_bytes(data)
+    p = tmp_path / "capture.bin"
+    p.write_bytes(data)
+    chunks = [data[i:i + 1000] for i in range(0, len(data), 1000)]
+    for source in (data, memoryview(data), str(p), p, open(p, "rb"), iter(chunks)):
+        batches = list(iter_decode(source, block_frames=512))
+        assert all(1 <= len(b) <= 512 for b in batches[:-1]) and len(batches[-1]) == 0
+        assert batches[-1].stats == want.stats
+        for col in want.columns:
+            got = np.concatenate([b[col] for b in batches])
+            assert np.array_equal(got, want[col], equal_nan=got.dtype.kind == "f"), col
+
+
+def test_bench_measures_a_fresh_process_with_anchors_from_the_same_run():
+    """`radar-io bench --json`: fresh-child figures and anchors that agree with each other."""
+    import json as _json
+
+    from conftest import run_cli
+
+    r = run_cli("bench", "--json", "--frames", "20000", "--repeat", "1", "--core-only")
+    assert r.returncode == 0, r.stderr
+    res = _json.loads(r.stdout)
+    c, d = res["clean"], res["damaged_1pct"]
+    # the clean stream: every frame accepted, by the decoder and by the plain-Python reference
+    assert c["frames_in"] == c["frames_accepted"] == c["reference_frames_ok"] == 20000
+    assert c["stats"]["crc_errors"] == 0 and c["bytes"] == 24 * 20000
+    # the damaged stream (bytes XORed, alignment kept) loses the same frames in both
+    assert d["stats"]["crc_errors"] > 0
+    assert d["reference_frames_ok"] == d["frames_accepted"] < 0.95 * 20000
+    for x in (c, d):
+        assert x["first_call_vs_reference"] == x["reference_s"] / x["first_call_s"]
+        assert x["best_vs_reference"] == x["reference_s"] / x["best_of_n_s"]
+        # a fresh child: its own peak, not the parent's (which holds both streams)
+        assert x["rss_before_mib"] <= x["peak_rss_mib"]
+    assert res["batch_damaged_1pct_accepted"] == d["frames_accepted"]

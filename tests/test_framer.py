@@ -14,20 +14,29 @@ import independent
 from radar_io.framing.framers import BatchFramer, Framer
 
 
-def reference(data: bytes) -> tuple[list[bytes], dict[str, int]]:
-    """The framing rules of radar-interface.md §3, byte by byte, as plainly as possible."""
+def rdr1_implausible(fr: bytes) -> bool:
+    """§3: unused bits of the 12-bit servo errors set, or TOD not below 24 h."""
+    return bool(fr[10] & 0xF0 or fr[14] & 0xF0 or fr[18] & 0xF0
+                or int.from_bytes(fr[4:8], "big") >= 864_000_000)
+
+
+def reference(data: bytes, sync: bytes = b"\xeb\x90", length: int = 24,
+              implausible=rdr1_implausible) -> tuple[list[bytes], dict[str, int]]:
+    """The framing rules of radar-interface.md §3, byte by byte, as plainly as possible.
+
+    Defaults: RDR1. The CRC is the last two bytes, over everything before them; SEQ is bytes 2-3.
+    """
     frames, st, pos, last = [], dict(frames=0, crc_errors=0, implausible=0, bytes_discarded=0,
                                      seq_gaps=0), 0, None
-    while pos + 24 <= len(data):
-        fr = data[pos:pos + 24]
-        if fr[:2] != b"\xeb\x90":
+    while pos + length <= len(data):
+        fr = data[pos:pos + length]
+        if fr[:2] != sync:
             st["bytes_discarded"] += 1
             pos += 1
             continue
-        if binascii.crc_hqx(fr[:22], 0xFFFF) != int.from_bytes(fr[22:], "big"):
+        if binascii.crc_hqx(fr[:-2], 0xFFFF) != int.from_bytes(fr[-2:], "big"):
             st["crc_errors"] += 1
-        elif fr[10] & 0xF0 or fr[14] & 0xF0 or fr[18] & 0xF0 or \
-                int.from_bytes(fr[4:8], "big") >= 864_000_000:
+        elif implausible(fr):
             st["implausible"] += 1
         else:
             frames.append(fr)
@@ -36,7 +45,7 @@ def reference(data: bytes) -> tuple[list[bytes], dict[str, int]]:
             if last is not None and (seq - last) % 65536:
                 st["seq_gaps"] += (seq - last) % 65536 - 1
             last = seq
-            pos += 24
+            pos += length
             continue
         st["bytes_discarded"] += 1
         pos += 1
@@ -254,3 +263,81 @@ def test_batch_framer_window_and_block_boundaries(data, window, block, seed):
         pos += n
     f.flush()
     assert (out, f.stats.as_dict()) == reference(data)
+
+
+# ---------------------------------------------------------------- TLM1 through the same core
+def tlm_frame(seq: int, words: tuple[int, ...] = (0,) * 10) -> bytes:
+    """A TLM1 frame typed in from radar-interface.md §8: SYNC 0x1ACF, SEQ, 10 x i16, CRC-16."""
+    body = b"\x1a\xcf" + seq.to_bytes(2, "big") + b"".join(
+        (w & 0xFFFF).to_bytes(2, "big") for w in words)
+    return body + binascii.crc_hqx(body, 0xFFFF).to_bytes(2, "big")
+
+
+def tlm_reference(data: bytes) -> tuple[list[bytes], dict[str, int]]:
+    """§3's rules for TLM1: a 26-byte frame, sync 0x1ACF, no plausibility limits."""
+    return reference(data, b"\x1a\xcf", 26, lambda fr: False)
+
+
+@pytest.mark.parametrize("seqs,gaps", [([7, 7, 8], 0), ([65535, 65535, 0], 0), ([3, 3, 3, 3], 0),
+                                       ([65535, 2], 2), ([10, 9], 65534)])
+def test_tlm1_uses_the_rdr1_seq_gap_rule(seqs, gaps):
+    """A repeated SEQ is a duplicate (0 gaps) for TLM1 too — it used to count 65 535."""
+    from radar_io.encoding.tlm1 import TelemetryDecoder
+
+    data = b"".join(tlm_frame(s) for s in seqs)
+    dec = TelemetryDecoder()
+    cols = dec.feed(data)
+    assert cols["seq"].tolist() == seqs
+    assert dec.stats["seq_gaps"] == gaps == tlm_reference(data)[1]["seq_gaps"]
+    rdr = b"".join(independent.frame(seq=s) for s in seqs)
+    assert run_per_frame(rdr, [])[1]["seq_gaps"] == gaps
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(0, 80), st.integers(0, 10_000), st.integers(0, 30), st.integers(0, 8),
+       st.integers(0, 8), st.integers(0, 8), st.integers(1, 60))
+def test_tlm1_both_front_ends_match_the_reference(n, seed, flips, drops, inserts, garbage, mean):
+    from radar_io.encoding.tlm1 import TelemetryDecoder, load_tlm_spec
+
+    rng = random.Random(seed)
+    frames = [tlm_frame((seed + i // 3 * 2) & 0xFFFF,   # repeated and skipped SEQs
+                        tuple(rng.randrange(-32768, 32768) for _ in range(10))) for i in range(n)]
+    data = damage(b"".join(frames), seed, flips, drops, inserts, garbage).replace(
+        b"\xeb\x90", b"\x1a\xcf")                        # junk sync words of this format
+    want = tlm_reference(data)
+    sizes = chunk_sizes(len(data), seed, mean)
+    spec = load_tlm_spec()
+    f, out, pos = Framer(spec), [], 0
+    for k in [*sizes, len(data)]:
+        out += f.feed(data[pos:pos + k])
+        pos += k
+    f.flush()
+    assert (out, f.stats.as_dict()) == want
+    dec, pos, seqs = TelemetryDecoder(spec), 0, []
+    for k in [*sizes, len(data)]:
+        seqs += dec.feed(data[pos:pos + k])["seq"].tolist()
+        pos += k
+    dec.flush()
+    assert dec.stats == want[1]
+    assert seqs == [int.from_bytes(fr[2:4], "big") for fr in want[0]]
+
+
+@pytest.mark.parametrize("poly,init,xor_out", [(0x1021, 0xFFFF, 0), (0x8005, 0x0000, 0xFFFF),
+                                                (0x3D65, 0x1234, 0x00FF)])
+def test_affine_crc_tables_match_the_bytewise_crc(poly, init, xor_out):
+    """crc = c0 ^ T_1[w_1] ^ … ^ T_10[w_10] equals the byte-by-byte CRC (binascii for CCITT)."""
+    from radar_io.wirespec.crc import crc_function, position_tables
+    from radar_io.wirespec.frame import CrcSpec
+
+    crc = crc_function(CrcSpec("x", 16, poly, init, False, False, xor_out, 0, 22))
+    c0, tables = position_tables(poly, init, xor_out, 0xEB90, 11)
+    rng = np.random.default_rng(poly)
+    w = rng.integers(0, 65536, (500, 11), dtype=np.uint16)
+    w[:, 0] = 0xEB90
+    acc = np.full(500, c0, dtype=np.uint16)
+    for k, t in enumerate(tables, start=1):
+        acc ^= t[w[:, k]]
+    want = [crc(row.astype(">u2").tobytes()) for row in w]
+    assert acc.tolist() == want
+    if poly == 0x1021 and init == 0xFFFF:
+        assert want == [binascii.crc_hqx(row.astype(">u2").tobytes(), 0xFFFF) for row in w]

@@ -142,3 +142,136 @@ def test_recording_decodes_through_the_same_framer_as_raw_bytes(tmp_path, spec):
     want = decode_bytes(data)
     assert batches[-1].stats == want.stats
     assert np.array_equal(np.concatenate([b["sr_m"] for b in batches]), want["sr_m"])
+
+
+# -- storage faults (issue 10 item 3) ------------------------------------------------------
+import errno  # noqa: E402
+
+from radar_io.errors import StorageError  # noqa: E402
+from radar_io.recording.recorder import Recorder  # noqa: E402
+
+
+def open_fds() -> set[str]:
+    return set(os.listdir("/proc/self/fd"))
+
+
+def disk_full_after(monkeypatch, path_part: str, budget: list[int]) -> None:
+    """os.write to files whose name contains ``path_part`` fails with ENOSPC once
+    ``budget[0]`` bytes are used up (the last write is cut short, as on a real disk)."""
+    real = os.write
+
+    def write(fd, data):
+        try:
+            ours = path_part in os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:
+            ours = False
+        if not ours:
+            return real(fd, data)
+        if budget[0] <= 0:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        n = real(fd, bytes(memoryview(data)[:budget[0]]))
+        budget[0] -= n
+        return n
+
+    monkeypatch.setattr(os, "write", write)
+
+
+def test_full_disk_at_creation_leaves_no_file_and_no_fd(tmp_path, spec, monkeypatch):
+    disk_full_after(monkeypatch, "full.rdrlog", [10])  # not even the header fits
+    before = open_fds()
+    for _ in range(5):
+        with pytest.raises(StorageError, match="No space left") as e:
+            RecordingWriter(tmp_path / "full.rdrlog", spec)
+        assert e.value.errno == errno.ENOSPC
+    assert not (tmp_path / "full.rdrlog").exists()
+    assert open_fds() == before
+    assert Recorder.http_status(e.value) == 507
+    assert Recorder.http_status(StorageError("x", errno=errno.EIO)) == 503
+
+
+def test_disk_filling_mid_chunk_keeps_whole_chunks(tmp_path, spec, monkeypatch):
+    budget = [10_000]
+    disk_full_after(monkeypatch, "mid.rdrlog", budget)
+    w = RecordingWriter(tmp_path / "mid.rdrlog", spec)
+    n = 0
+    with pytest.raises(StorageError, match="cannot write recording"):
+        while True:
+            w.write(payload(n))
+            n += 1
+    assert budget[0] == 0  # the last chunk was cut short by the full disk …
+    size = (tmp_path / "mid.rdrlog").stat().st_size
+    assert size == w.committed_bytes  # … and cut off again: the file ends on a whole chunk
+    w.close()
+    with RecordingReader(tmp_path / "mid.rdrlog") as r:
+        assert [c.data for c in r] == [payload(i) for i in range(n)]
+        assert r.report.torn_tail_bytes == 0
+
+
+def test_fsync_error_is_raised_not_swallowed(tmp_path, spec, monkeypatch):
+    w = RecordingWriter(tmp_path / "s.rdrlog", spec, fsync_interval_s=0.05)
+    w.write(b"before")
+    real = os.fsync
+
+    def fsync(fd):
+        if fd == w._fd:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        return real(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    deadline = time.monotonic() + 10
+    while w.fsync_error is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    with pytest.raises(StorageError, match="fsync failed.*Input/output error"):
+        w.write(b"after")
+    with pytest.raises(StorageError, match="fsync failed"):
+        w.close()
+    assert w.closed
+
+
+def test_recorder_on_a_full_disk_never_raises_and_retries(tmp_path, spec, monkeypatch):
+    budget = [0]
+    disk_full_after(monkeypatch, "recordings", budget)
+    rec = Recorder(tmp_path, spec, None, "test", auto="go", retry_s=0.2)
+    frame = independent.frame(seq=1, sts=5)
+    rec.on_chunk(frame, 1)
+    rec.on_go_edge(True)  # GO rises: the start fails, reported, not raised
+    assert rec.current is None and "No space left" in rec.last_error
+    assert list(rec.dir.iterdir()) == []
+    rec.on_chunk(frame, 2)  # before retry_s: no new attempt
+    assert rec.storage()["errors"] == 1
+    budget[0] = 1 << 30  # space is back
+    time.sleep(0.25)
+    rec.on_chunk(frame, 3)  # retried on the next chunk
+    assert rec.current is not None and rec.last_error is None
+    st = rec.storage()
+    assert "No space left" in st["last_error"] and st["free_bytes"] > 0
+    rec.stop()
+
+
+FSIZE_WRITER = textwrap.dedent("""
+    import resource, signal, sys
+    from radar_io.errors import StorageError
+    from radar_io.recording.rdrlog import RecordingWriter
+    from radar_io.wirespec.frame import load_spec
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (50_000, 50_000))
+    w = RecordingWriter({path!r}, load_spec())
+    n = 0
+    try:
+        while True:
+            w.write(bytes(range(256)) * 2)
+            n += 1
+    except StorageError as exc:
+        print(n, exc.errno, exc, flush=True)
+""")
+
+
+def test_file_size_limit_in_a_subprocess(tmp_path):
+    p = tmp_path / "lim.rdrlog"
+    out = subprocess.run([sys.executable, "-c", FSIZE_WRITER.format(path=str(p))],
+                         capture_output=True, text=True, timeout=60)
+    n, err_no, msg = out.stdout.split(" ", 2)
+    assert int(err_no) == errno.EFBIG and "size limit" in msg
+    assert p.stat().st_size <= 50_000
+    with RecordingReader(p) as r:
+        assert len(list(r)) == int(n) and r.report.torn_tail_bytes == 0

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from radar_io.errors import CalibrationInputError
+from radar_io.textfiles import decode_text
 
 
 @dataclass(frozen=True)
@@ -69,10 +70,7 @@ def read_table(path: str | os.PathLike[str], *, min_rows: int = 1) -> Table:
         raise CalibrationInputError(f"input file not found: {p}") from exc
     except OSError as exc:
         raise CalibrationInputError(f"cannot read {p}: {exc.strerror or exc}") from exc
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise CalibrationInputError(f"{p}: not a UTF-8 text file") from exc
+    text = decode_text(p, data, "input file", CalibrationInputError)
     reader = csv.reader(text.splitlines())
     columns: tuple[str, ...] | None = None
     rows: list[tuple[str, ...]] = []

@@ -11,13 +11,20 @@ from typing import Any
 from radar_io.cli.common import add_common, load_common
 from radar_io.errors import ConfigError
 
+#: bytes read and decoded at a time (~44 k frames): memory does not grow with the input
+CHUNK_BYTES = 1 << 20
+
+
 def add_subparser(sub: Any) -> None:
-    p = sub.add_parser("decode", help="decode a raw capture or .rdrlog to CSV / JSON lines",
+    p = sub.add_parser("decode", help="decode a raw capture or .rdrlog to CSV, JSON lines, "
+                       "Parquet or Arrow",
                        description="Decode RDR1 frames from a raw capture (any bytes) or a "
-                       ".rdrlog recording; one row per accepted frame.")
+                       ".rdrlog recording; one row per accepted frame. The output is written "
+                       "under a temporary name and renamed when complete.")
     p.add_argument("input", metavar="INPUT", help="raw capture or .rdrlog ('-' for stdin)")
     p.add_argument("-o", "--output", metavar="OUT", help="output file (default stdout)")
-    p.add_argument("--format", choices=("csv", "jsonl"), help="default from OUT's extension, else csv")
+    p.add_argument("--format", choices=("csv", "jsonl", "parquet", "arrow"),
+                   help="default from OUT's extension (.csv .jsonl .parquet .arrow), else csv")
     p.add_argument("--stats", metavar="STATS.json", help="write the framer counters here")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.add_argument("--path", metavar="PATH", help="reference path TOML: adds dy_m,dz_m,along_m,leg")
@@ -33,37 +40,33 @@ def run(args: argparse.Namespace) -> int:
     from radar_io.decoding.decoders import iter_decode
     from radar_io.coordinates.reference_path import add_deviation
     from radar_io.cli.progress import Progress
-    from radar_io.sinks.table import MeasurementWriter
+    from radar_io.sinks import open_table
+    from radar_io.sinks.arrow_table import output_metadata
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
 
     common = load_common(args)
     path, tlm, da = _guidance_outputs(args)  # bad options fail before any output is created
-    fmt = args.format or ("jsonl" if args.output and args.output.endswith((".jsonl", ".json"))
-                          else "csv")
     if args.input != "-" and not os.path.exists(args.input):
         raise ConfigError(f"input not found: {args.input}")
+    meta = output_metadata(common["spec"], common["site"], common["calibration"],
+                           source=args.input)
     progress = Progress("decode", enabled=not args.quiet)
     report = ReadReport()
+    state: dict[str, Any] = {"frames": 0}
     if args.input == "-":
         stdin = sys.stdin.buffer
         chunks = iter(lambda: stdin.read1(1 << 20), b"")
     else:
-        chunks = iter_payloads(args.input, progress=lambda d, t: _progress(progress, d, t, state),
+        chunks = iter_payloads(args.input, chunk_bytes=CHUNK_BYTES,
+                               progress=lambda d, t: _progress(progress, d, t, state),
                                report=report)
-    state: dict[str, Any] = {"frames": 0}
-    try:
-        out = (open(args.output, "w", encoding="utf-8", newline="") if args.output
-               else sys.stdout)
-    except OSError as exc:
-        raise ConfigError(f"cannot write {args.output}: {exc.strerror}") from exc
+    writer = open_table(args.output or "-", args.format, metadata=meta)
     stats: dict[str, int] = {}
+    old_term = _terminate_as_interrupt()
     try:
-        writer = None
         for batch in iter_decode(chunks, **common):
             if path is not None:
                 batch = add_deviation(batch, path)
-            if writer is None:
-                writer = MeasurementWriter(out, batch.columns, fmt)
             writer.write(batch)
             if tlm is not None:
                 tlm.send(batch)
@@ -71,13 +74,17 @@ def run(args: argparse.Namespace) -> int:
                 da.send(batch)
             state["frames"] = batch.stats["frames"]
             stats = batch.stats
-        out.flush()
+        writer.final_metadata.update({k: str(v) for k, v in stats.items()})
+        writer.close()  # the output appears under its name only now
     except BrokenPipeError:
+        writer.abort()
         sys.stderr.close()  # downstream closed (e.g. `| head`): stop quietly
         return 0
+    except BaseException:
+        writer.abort()  # error, Ctrl-C or SIGTERM: no half-written output left behind
+        raise
     finally:
-        if out is not sys.stdout:
-            out.close()
+        _restore_terminate(old_term)
         for sink in (tlm, da):
             if sink is not None:
                 sink.close()
@@ -101,6 +108,27 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ConfigError(f"cannot write {args.stats}: {exc.strerror}") from exc
     return 0
+
+
+def _terminate_as_interrupt() -> Any:
+    """Make SIGTERM raise KeyboardInterrupt (as Ctrl-C does), so outputs are cleaned up."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+
+    def _raise(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    return signal.signal(signal.SIGTERM, _raise)
+
+
+def _restore_terminate(old: Any) -> None:
+    import signal
+
+    if old is not None:
+        signal.signal(signal.SIGTERM, old)
 
 
 def _guidance_outputs(args: argparse.Namespace) -> tuple[Any, Any, Any]:

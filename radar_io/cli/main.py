@@ -17,7 +17,8 @@ from radar_io.errors import RadarIOError
 COMMANDS = (
     "radar_io.cli.decode", "radar_io.cli.simulate", "radar_io.cli.monitor",
     "radar_io.cli.serve", "radar_io.cli.bench", "radar_io.cli.calibrate",
-    "radar_io.cli.runway", "radar_io.cli.airborne",
+    "radar_io.cli.runway", "radar_io.cli.airborne", "radar_io.cli.archive",
+    "radar_io.cli.report", "radar_io.cli.doctor",
 )
 
 
@@ -39,7 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except RadarIOError as exc:
-        print(f"radar-io: error: {exc}", file=sys.stderr)
+        from radar_io.textfiles import one_line
+
+        print(f"radar-io: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

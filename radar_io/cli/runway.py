@@ -11,7 +11,6 @@ import glob
 import json
 import math
 import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -187,8 +186,10 @@ def run(args: argparse.Namespace) -> int:
     if args.video:
         frames, total = _frames(args.video)
         tracker = RunwayTracker(args.focal_px, args.half_width_m, pp, camera_offset_m=offset, params=params)
+        from radar_io.cli.progress import Progress
+
+        progress = Progress("runway", total=total or None, unit="frames", scale=1.0)
         n = found = 0
-        last = time.monotonic()
         for label, index, img in frames:
             if img is None:  # one bad frame in a sequence is reported, not fatal
                 res = RunwayResult.not_found(f"cannot read image {label}")
@@ -197,12 +198,8 @@ def run(args: argparse.Namespace) -> int:
             _emit({"image": label, "frame": index, **res.to_dict()})
             n += 1
             found += res.found
-            now = time.monotonic()
-            if now - last >= 1.0:
-                of = f"/{total}" if total else ""
-                print(f"runway: frame {n}{of}, runway found in {found}", file=sys.stderr, flush=True)
-                last = now
-        print(f"runway: {n} frames, runway found in {found}", file=sys.stderr, flush=True)
+            progress.update(n, f"runway found in {found}")
+        progress.close(f"{n} frames, runway found in {found}")
         return 0
 
     for path in args.images:

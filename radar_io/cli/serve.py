@@ -28,6 +28,10 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--path", help="reference path TOML: deviation needles, DY/DZ in messages")
     p.add_argument("--tlm-out", help="TLM1 uplink: udp://host:port, a serial URL/device or a file")
     p.add_argument("--da-out", help="D/A recorder words: a serial URL/device or a file")
+    p.add_argument("--publish", metavar="URL", help="MQTT: mqtt://HOST:PORT/PREFIX[?qos=0|1] or "
+                   "mqtts://…; user/password from the config or RADAR_IO_MQTT_USER/PASSWORD")
+    p.add_argument("--asterix-out", metavar="URL", help="ASTERIX CAT048 target reports: "
+                   "udp://HOST:PORT (one data block per datagram), a serial URL or a file")
     p.add_argument("--can", metavar="INTERFACE:CHANNEL",
                    help="aircraft air data over CAN, e.g. socketcan:can0 or virtual:air")
     p.set_defaults(func=run)
@@ -48,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
         "source": args.source, "host": args.host, "port": args.port, "site": args.site,
         "calibration": args.calibration, "data_dir": args.data_dir,
         "auto_record": args.auto_record, "token_file": args.token_file, "path": args.path,
-        "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can})
+        "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can,
+        "publish": args.publish, "asterix_out": args.asterix_out})
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     app = build_app(cfg)
     state = app.state.service

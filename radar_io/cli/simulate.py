@@ -78,22 +78,21 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ConfigError(f"cannot write {target}: {exc.strerror}") from exc
         write, close = f.write, f.close
+    from radar_io.cli.progress import Progress
+
     total = args.duration_s if args.duration_s is not None else script.duration_s
-    sent = 0
+    progress = Progress("simulate", total=int(total * args.rate_hz),
+                        enabled=not args.quiet and target != "-", unit="kframes", scale=1e-3)
     t0 = time.monotonic()
     try:
         for data in sim.stream(block_s=0.02, duration_s=args.duration_s, realtime=realtime):
             write(data)
-            sent += 1
-            if not args.quiet and target != "-" and sent % 50 == 0:
-                done = sim.state.frame_index / args.rate_hz
-                print(f"\rsimulate: {done:7.1f} / {total:.1f} s  {sim.state.frame_index} frames",
-                      end="", file=sys.stderr, flush=True)
+            progress.update(sim.state.frame_index)
     except BrokenPipeError:
         return 0
     finally:
         close()
-    if not args.quiet and target != "-":
-        print(f"\rsimulate: {sim.state.frame_index} frames in {time.monotonic() - t0:.1f} s"
-              f" to {target}; corruption {sim.state.counts}", file=sys.stderr)
+    if target != "-":
+        progress.close(f"{sim.state.frame_index} frames in {time.monotonic() - t0:.1f} s"
+                       f" to {target}; corruption {sim.state.counts}")
     return 0

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 
 from radar_io.decoding.decoders import MeasurementBatch
-from radar_io.textfiles import read_toml
+from radar_io.textfiles import Fields, read_toml
 from radar_io.errors import ConfigError
 
 #: columns added by :func:`add_deviation`
@@ -224,37 +224,23 @@ class ReferencePath:
 
 
 def load_path(path: str | os.PathLike[str]) -> ReferencePath:
-    """Read a path TOML file (see ``firmware_specs/paths/``); raises PathError naming the problem."""
+    """Read a path TOML file (see ``firmware_specs/paths/``); every field is checked and a bad
+    one raises PathError naming the file and the field (``points[2].x_m``)."""
     p = Path(path)
-    doc = read_toml(p, "path file", PathError)
-    unknown = set(doc) - _TOP_KEYS
-    if unknown:
-        raise PathError(f"{p}: unknown key(s) {', '.join(sorted(unknown))}")
-    frame = doc.get("frame")
-    if frame not in FRAME_COLUMNS:
-        raise PathError(f"{p}: frame must be \"radar\" or \"runway\", got {frame!r}")
-    radius = _number(doc, "turn_radius_m", f"{p}")
-    pts = doc.get("points")
-    if not isinstance(pts, list) or not all(isinstance(q, dict) for q in pts):
-        raise PathError(f"{p}: expected [[points]] tables with x_m, y_m, h_m")
+    f = Fields(read_toml(p, "path file", PathError, allow_empty=False), p, "path file", PathError)
+    f.only(*sorted(_TOP_KEYS))
+    frame = f.string("frame", choices=tuple(FRAME_COLUMNS))
+    radius = f.number("turn_radius_m", 0.0, 1e6, above=0.0)
+    name = f.string("name", default=p.stem)
+    f.string("description", default="")
     rows = []
-    for i, q in enumerate(pts):
-        where = f"{p}: pass point {i} ([[points]] #{i + 1})"
-        unknown = set(q) - _POINT_KEYS
-        if unknown:
-            raise PathError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
-        rows.append([_number(q, k, where) for k in ("x_m", "y_m", "h_m")])
+    for q in f.tables("points", min_count=2):
+        q.only(*sorted(_POINT_KEYS))
+        q.string("name", default="")
+        rows.append([q.number("x_m", -1e7, 1e7), q.number("y_m", -1e7, 1e7),
+                     q.number("h_m", -1e4, 1e5)])
     return ReferencePath(np.array(rows, dtype=np.float64).reshape(-1, 3), radius, frame,
-                         name=str(doc.get("name", p.stem)), source=str(p))
-
-
-def _number(table: dict[str, Any], key: str, where: str) -> float:
-    if key not in table:
-        raise PathError(f"{where}: missing {key}")
-    v = table[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise PathError(f"{where}: {key} must be a finite number, got {v!r}")
-    return float(v)
+                         name=name, source=f"path file {p}")
 
 
 def add_deviation(batch: MeasurementBatch, path: ReferencePath) -> MeasurementBatch:

@@ -7,7 +7,6 @@ X north, Y east, H up (left-handed; Z = -H is the right-handed down axis).
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +16,7 @@ import numpy as np
 import pymap3d
 
 from radar_io.errors import ConfigError
-from radar_io.textfiles import read_toml
+from radar_io.textfiles import Fields, read_toml
 
 ArrayLike = Any
 
@@ -53,42 +52,77 @@ class Site:
     radar_yr_m: float = 0.0
     radar_hr_m: float = 0.0
     description: str = ""
+    asterix_sac: int | None = None   #: ASTERIX System Area Code 0..255 ([asterix] sac), None if unset
+    asterix_sic: int | None = None   #: ASTERIX System Identification Code 0..255 ([asterix] sic)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        doc: dict[str, Any] = {
             "name": self.name, "description": self.description,
             "radar": {"lat_deg": self.lat_deg, "lon_deg": self.lon_deg, "h_m": self.h_m},
             "runway": {"heading_deg": self.runway_heading_deg, "radar_xr_m": self.radar_xr_m,
                        "radar_yr_m": self.radar_yr_m, "radar_hr_m": self.radar_hr_m},
         }
+        if self.asterix_sac is not None:
+            doc["asterix"] = {"sac": self.asterix_sac, "sic": self.asterix_sic}
+        return doc
+
+
+def site_names() -> list[str]:
+    """Names of the packaged sites (``firmware_specs/sites/NAME.toml``)."""
+    from radar_io.wirespec.frame import spec_dir
+
+    return sorted(q.stem for q in (spec_dir() / "sites").glob("*.toml"))
+
+
+def resolve_site(site: str | os.PathLike[str]) -> Path:
+    """The file of ``site``: an existing path, else the packaged site of that name (``demo``)."""
+    from radar_io.wirespec.frame import spec_dir
+
+    p = Path(site)
+    if p.exists() or os.sep in str(site) or p.suffix:
+        return p
+    named = spec_dir() / "sites" / f"{site}.toml"
+    if named.is_file():
+        return named
+    raise ConfigError(f"site {str(site)!r}: no such file and no packaged site of that name "
+                      f"(packaged: {', '.join(site_names()) or 'none'})")
+
+
+#: [section] → keys allowed in a site file (docs/input-validation.md)
+SITE_KEYS = {"radar": ("lat_deg", "lon_deg", "h_m"),
+             "runway": ("heading_deg", "radar_xr_m", "radar_yr_m", "radar_hr_m"),
+             "asterix": ("sac", "sic")}
 
 
 def load_site(path: str | os.PathLike[str]) -> Site:
-    """Read a site TOML file (see ``firmware_specs/sites/demo.toml``)."""
-    p = Path(path)
-    doc = read_toml(p, "site file")
-
-    def num(section: str, key: str, lo: float, hi: float) -> float:
-        tab = doc.get(section)
-        if not isinstance(tab, dict) or key not in tab:
-            raise ConfigError(f"site file {p}: missing [{section}] {key}")
-        v = tab[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ConfigError(f"site file {p}: [{section}] {key} must be a number, got {v!r}")
-        if not lo <= v <= hi:
-            raise ConfigError(f"site file {p}: [{section}] {key} = {v} outside {lo} .. {hi}")
-        return float(v)
-
+    """Read a site TOML file, or the packaged site named ``path`` (``"demo"``); every field
+    is checked and a bad one raises ConfigError naming the file and the field."""
+    p = resolve_site(path)
+    f = Fields(read_toml(p, "site file", allow_empty=False), p, "site file")
+    f.only("name", "description", *SITE_KEYS)
+    radar = f.table("radar")
+    runway = f.table("runway")
+    asterix = f.table("asterix", required=False)
+    assert radar is not None and runway is not None
+    radar.only(*SITE_KEYS["radar"])
+    runway.only(*SITE_KEYS["runway"])
+    sac = sic = None
+    if asterix is not None:
+        asterix.only(*SITE_KEYS["asterix"])
+        sac = asterix.integer("sac", 0, 255)
+        sic = asterix.integer("sic", 0, 255)
     return Site(
-        name=str(doc.get("name", p.stem)),
-        description=str(doc.get("description", "")),
-        lat_deg=num("radar", "lat_deg", -90, 90),
-        lon_deg=num("radar", "lon_deg", -180, 180),
-        h_m=num("radar", "h_m", -1000, 10000),
-        runway_heading_deg=num("runway", "heading_deg", -360, 360),
-        radar_xr_m=num("runway", "radar_xr_m", -1e6, 1e6),
-        radar_yr_m=num("runway", "radar_yr_m", -1e6, 1e6),
-        radar_hr_m=num("runway", "radar_hr_m", -1e4, 1e4),
+        name=f.string("name", default=p.stem, nonempty=True),
+        description=f.string("description", default=""),
+        lat_deg=radar.number("lat_deg", -90, 90),
+        lon_deg=radar.number("lon_deg", -180, 180),
+        h_m=radar.number("h_m", -1000, 10000),
+        runway_heading_deg=runway.number("heading_deg", -360, 360),
+        radar_xr_m=runway.number("radar_xr_m", -1e6, 1e6),
+        radar_yr_m=runway.number("radar_yr_m", -1e6, 1e6),
+        radar_hr_m=runway.number("radar_hr_m", -1e4, 1e4),
+        asterix_sac=sac,
+        asterix_sic=sic,
     )
 
 

@@ -24,6 +24,7 @@ import numpy as np
 
 from radar_io.wirespec.frame import spec_dir
 from radar_io.errors import AirborneError
+from radar_io.textfiles import decode_text, one_line, read_text
 
 #: message name → the signals radar_io relies on
 REQUIRED = {
@@ -46,22 +47,22 @@ def load_dbc(path: str | os.PathLike[str] | None = None) -> Any:
     import cantools
 
     p = Path(path) if path is not None else spec_dir() / "airdata.dbc"
+    text = decode_text(*read_text(p, "DBC file", AirborneError), "DBC file", AirborneError,
+                       allow_empty=False)
     try:
-        db = cantools.database.load_file(str(p), database_format="dbc")
-    except FileNotFoundError as exc:
-        raise AirborneError(f"DBC file not found: {p}") from exc
+        db = cantools.database.load_string(text, database_format="dbc")
     except Exception as exc:  # noqa: BLE001 - cantools raises many parse error types
-        raise AirborneError(f"cannot load DBC file {p}: {exc}") from exc
+        raise AirborneError(one_line(f"DBC file {p} cannot be parsed: {exc}")) from exc
     for name, signals in REQUIRED.items():
         try:
             msg = db.get_message_by_name(name)
         except KeyError as exc:
-            raise AirborneError(f"{p}: no message {name}") from exc
+            raise AirborneError(f"DBC file {p}: message {name}: missing") from exc
         missing = [s for s in signals if s not in {x.name for x in msg.signals}]
         if missing:
-            raise AirborneError(f"{p}: message {name} lacks signal(s) {', '.join(missing)}")
+            raise AirborneError(f"DBC file {p}: message {name}: missing signal(s) {', '.join(missing)}")
         if msg.is_extended_frame:
-            raise AirborneError(f"{p}: message {name} must use a standard (11-bit) identifier")
+            raise AirborneError(f"DBC file {p}: message {name}: must use a standard (11-bit) identifier")
     return db
 
 

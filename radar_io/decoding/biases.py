@@ -26,9 +26,13 @@ from pathlib import Path
 from typing import Any
 
 from radar_io.errors import ConfigError
-from radar_io.textfiles import read_json
+from radar_io.textfiles import Fields, read_json, show
 
 FORMAT = "radar_io-calibration/1"
+#: keys of a calibration set document
+TOP_KEYS = ("format", "id", "created_utc", "biases", "statistics", "provenance")
+#: bias → largest magnitude accepted (m, deg, deg): beyond that the set is a mistake, not a bias
+BIAS_LIMITS = {"dsr_m": 10_000.0, "del_deg": 90.0, "daz_deg": 180.0}
 
 
 @dataclass(frozen=True)
@@ -62,34 +66,25 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, doc: Any, *, source: str = "calibration") -> "Calibration":
-        """Validate and build a set from its JSON document; raises ConfigError naming the problem."""
-        if not isinstance(doc, dict):
-            raise ConfigError(f"{source}: a calibration set must be a JSON object")
-        fmt = doc.get("format", FORMAT)
+        """Validate and build a set from its JSON document; raises ConfigError naming the field."""
+        f = Fields(doc, source, "calibration set")
+        f.only(*TOP_KEYS)
+        fmt = f.string("format", default=FORMAT)
         if fmt != FORMAT:
-            raise ConfigError(f"{source}: unsupported calibration format {fmt!r} (expected {FORMAT!r})")
-        biases = doc.get("biases")
-        if not isinstance(biases, dict):
-            raise ConfigError(f"{source}: missing object 'biases' with dsr_m, del_deg, daz_deg")
-        unknown = set(biases) - {"dsr_m", "del_deg", "daz_deg"}
-        if unknown:
-            raise ConfigError(f"{source}: unknown bias key(s) {sorted(unknown)}")
-        try:
-            return cls(
-                dsr_m=biases.get("dsr_m", 0.0),
-                del_deg=biases.get("del_deg", 0.0),
-                daz_deg=biases.get("daz_deg", 0.0),
-                id=str(doc.get("id", "unnamed")),
-                created_utc=str(doc.get("created_utc", "")),
-                statistics=dict(doc.get("statistics") or {}),
-                provenance=dict(doc.get("provenance") or {}),
-            )
-        except ConfigError as exc:
-            raise ConfigError(f"{source}: {exc}") from exc
+            f.fail("format", f"unsupported calibration format {show(fmt)} (expected {FORMAT!r})")
+        biases = f.table("biases")
+        assert biases is not None
+        biases.only(*BIAS_LIMITS)
+        values = {k: biases.number(k, -lim, lim, default=0.0) for k, lim in BIAS_LIMITS.items()}
+        return cls(**values,
+                   id=f.string("id", default="unnamed", nonempty=True),
+                   created_utc=f.string("created_utc", default=""),
+                   statistics=f.mapping("statistics"),
+                   provenance=f.mapping("provenance"))
 
 
 def load_calibration(path: str | os.PathLike[str]) -> Calibration:
-    """Read a calibration set JSON file."""
+    """Read a calibration set JSON file; every field is checked (docs/input-validation.md)."""
     doc = read_json(path, "calibration file")
     return Calibration.from_dict(doc, source=str(path))
 

@@ -17,10 +17,24 @@ import numpy as np
 
 from radar_io.errors import SpecError
 from radar_io.errors import UplinkError
-from radar_io.wirespec.reading import positive, read_toml, req, tables
+from radar_io.wirespec.reading import keys, positive, read_toml, req, tables
 from radar_io.encoding.tlm1 import COLUMN_HINTS
 
 PEN_UP_DATA = ("hold", "zero")
+#: sources the encoder derives from other columns when the batch lacks them:
+#: Z = -H, the right-handed down axis of radar-interface.md §5 (channel 8 of §7)
+DERIVED_SOURCES = {"z_m": ("h_m", -1.0)}
+
+
+def source_values(cols: Mapping[str, np.ndarray], source: str) -> np.ndarray | None:
+    """The column ``source`` from ``cols`` (derived ones such as ``z_m`` = -``h_m`` computed), or None."""
+    if source in cols:
+        return np.asarray(cols[source], dtype=np.float64)
+    if source in DERIVED_SOURCES:
+        base, sign = DERIVED_SOURCES[source]
+        if base in cols:
+            return sign * np.asarray(cols[base], dtype=np.float64)
+    return None
 
 
 @dataclass(frozen=True)
@@ -71,8 +85,10 @@ def _contiguous(mask: int) -> bool:
 def load_da_spec(path: str | os.PathLike[str] | None = None) -> DASpec:
     """Load and validate ``firmware_specs/da_words.toml`` (or ``path``)."""
     doc, p, sha = read_toml(path, "da_words.toml")
+    keys(doc, "word channel", p)
     w = req(doc, "word", dict, p)
     where = f"{p} [word]"
+    keys(w, "name spec_version byte_order pen_up_mask channel_mask data_mask pen_up_data", where)
     if req(w, "byte_order", str, where) != "big":
         raise SpecError(f"{where}: only byte_order = 'big' is supported")
     pen, chm, data = (req(w, k, int, where) for k in ("pen_up_mask", "channel_mask", "data_mask"))
@@ -91,6 +107,7 @@ def load_da_spec(path: str | os.PathLike[str] | None = None) -> DASpec:
         cw = f"{p} [[channel]] #{i + 1}"
         name = req(c, "name", str, cw)
         cw = f"{p} channel {name!r}"
+        keys(c, "number name source full_scale gain unit description", cw)
         number = req(c, "number", int, cw)
         if not 1 <= number <= max_ch + 1:
             raise SpecError(f"{cw}: number must be 1 .. {max_ch + 1}")
@@ -129,8 +146,9 @@ class DAEncoder:
     def words(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
         """(rows, channels) uint16 words for a batch; updates the counters and the held data."""
         spec = self.spec
+        src = {c.source: source_values(cols, c.source) for c in spec.channels}
         for c in spec.channels:
-            if c.source not in cols:
+            if src[c.source] is None:
                 hint = COLUMN_HINTS.get(c.source)
                 raise UplinkError(f"{spec.name} channel {c.number} ({c.name}) needs column "
                                   f"{c.source!r}" + (f" ({hint})" if hint else ""))
@@ -139,7 +157,7 @@ class DAEncoder:
         out = np.empty((n, len(spec.channels)), dtype=np.uint16)
         lo, hi = self._range
         for k, c in enumerate(spec.channels):
-            v = c.gain * np.asarray(cols[c.source], dtype=np.float64)
+            v = c.gain * src[c.source]
             down = valid & np.isfinite(v)
             counts = np.rint(np.where(down, v, 0.0) / spec.lsb(c))
             sat = down & ((counts < lo) | (counts > hi))

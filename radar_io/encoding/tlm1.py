@@ -28,7 +28,7 @@ from radar_io.errors import SpecError
 from radar_io.wirespec.frame import CrcSpec
 from radar_io.errors import UplinkError
 from radar_io.encoding.kinematics import KINEMATIC_COLUMNS, Kinematics
-from radar_io.wirespec.reading import crc_spec, positive, read_toml, req, tables
+from radar_io.wirespec.reading import crc_spec, keys, positive, read_toml, req, tables
 
 SCALINGS = ("full_scale", "raw_bits", "zero")
 #: how to get a missing source column
@@ -75,8 +75,11 @@ class TelemetrySpec:
 def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
     """Load and validate ``firmware_specs/tlm1.toml`` (or ``path``); SpecError names the problem."""
     doc, p, sha = read_toml(path, "tlm1.toml")
+    keys(doc, "frame crc kinematics channel", p)
     fr = req(doc, "frame", dict, p)
     where = f"{p} [frame]"
+    keys(fr, "name spec_version length_bytes byte_order sync_word seq_offset full_scale_count "
+         "cycle_s", where)
     length = req(fr, "length_bytes", int, where)
     if req(fr, "byte_order", str, where) != "big":
         raise SpecError(f"{where}: only byte_order = 'big' is supported")
@@ -102,6 +105,7 @@ def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
         cw = f"{p} [[channel]] #{i + 1}"
         name = req(c, "name", str, cw)
         cw = f"{p} channel {name!r}"
+        keys(c, "number name offset source scaling full_scale unit description", cw)
         off = req(c, "offset", int, cw)
         if off % 2:
             raise SpecError(f"{cw}: offset must be even (16-bit words)")
@@ -125,6 +129,9 @@ def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
         if len(set(vals)) != len(vals):
             raise SpecError(f"{p}: channel {attr}s must be unique")
     k = doc.get("kinematics", {})
+    if not isinstance(k, dict):
+        raise SpecError(f"{p}: [kinematics] must be a table")
+    keys(k, "window_s min_span_s min_samples", f"{p} [kinematics]")
     kin = (positive(k, "window_s", f"{p} [kinematics]", 1.0),
            positive(k, "min_span_s", f"{p} [kinematics]", 0.5),
            int(positive(k, "min_samples", f"{p} [kinematics]", 10)))
@@ -290,61 +297,40 @@ class TelemetryEncoder:
 
 # ----------------------------------------------------------------- decoder
 class TelemetryDecoder:
-    """Aircraft side: bytes → decoded channel values, hunting for SYNC and checking the CRC.
+    """Aircraft side: bytes → decoded channel values, framed by the one framer core.
 
-    ``stats``: frames, crc_errors (sync word found but CRC wrong), bytes_discarded
-    (while hunting), seq_gaps (frames lost, from SEQ modulo 2**16).
+    ``stats``: frames, crc_errors (sync word found but CRC wrong), implausible (0),
+    bytes_discarded (while hunting), seq_gaps (frames lost, from SEQ modulo 2**16;
+    a repeated SEQ counts 0, the RDR1 rule).
     """
 
     def __init__(self, spec: TelemetrySpec | None = None) -> None:
+        from radar_io.framing.core import BatchFramer
+
         self.spec = spec = spec or load_tlm_spec()
-        self.stats = {"frames": 0, "crc_errors": 0, "bytes_discarded": 0, "seq_gaps": 0}
-        self._tail = b""
-        self._last_seq: int | None = None
+        #: the one framer core (radar_io.framing.core), with the TLM1 format: same rules and
+        #: counters as RDR1, including the SEQ-gap rule (a repeated SEQ counts 0)
+        self.framer = BatchFramer(spec)
         self._struct = frame_struct(spec)
         self._crc = crc_function(spec.crc)
 
+    @property
+    def stats(self) -> dict[str, int]:
+        """frames, crc_errors, implausible (always 0: TLM1 declares no limits),
+        bytes_discarded, seq_gaps — the framer core's counters."""
+        return self.framer.stats.as_dict()
+
     def feed(self, data: bytes | bytearray | memoryview) -> dict[str, np.ndarray]:
         """Decode every complete frame in the data so far: ``seq`` and one column per channel."""
-        spec, L, st = self.spec, self.spec.length, self.stats
-        buf = self._tail + bytes(data)
-        b = np.frombuffer(buf, dtype=np.uint8)
-        n = b.size
-        sync = spec.sync_word.to_bytes(2, "big")
-        cand = np.flatnonzero((b[:-1] == sync[0]) & (b[1:] == sync[1])) if n >= 2 else np.empty(0, int)
-        cand = cand[cand <= n - L]
-        w = b[cand[:, None] + np.arange(L)].view(">u2").astype(np.uint16) if cand.size else \
-            np.empty((0, L // 2), np.uint16)
-        ok = frame_crc(spec, w) == w[:, spec.crc.offset // 2]
-        pos, take = 0, []
-        for i, p in enumerate(cand.tolist()):   # hunt: a frame where the CRC checks, else slide
-            if p < pos:
-                continue
-            if ok[i]:
-                st["bytes_discarded"] += p - pos
-                take.append(i)
-                pos = p + L
-            else:
-                st["crc_errors"] += 1
-        end = max(pos, n - L + 1)
-        st["bytes_discarded"] += end - pos
-        self._tail = buf[end:]
-        frames = w[take]
-        return self._columns(frames)
+        return self._columns(self.framer.feed(data))
 
     def flush(self) -> None:
         """End of stream: the incomplete tail is discarded."""
-        self.stats["bytes_discarded"] += len(self._tail)
-        self._tail = b""
+        self.framer.flush()
 
     def _columns(self, frames: np.ndarray) -> dict[str, np.ndarray]:
         spec = self.spec
         seq = frames[:, spec.seq_offset // 2].astype(np.int64)
-        if seq.size:
-            prev = np.concatenate([[seq[0] - 1 if self._last_seq is None else self._last_seq], seq[:-1]])
-            self.stats["seq_gaps"] += int(((seq - prev - 1) % 65536).sum())
-            self._last_seq = int(seq[-1])
-        self.stats["frames"] += int(seq.size)
         out = {"seq": seq}
         for c in spec.channels:
             out[c.column] = channel_values(c, frames[:, c.offset // 2], spec.full_scale_count)

@@ -15,7 +15,12 @@ File layout (all integers big-endian)::
 
 Each chunk is handed to the kernel in one ``write`` on an ``O_APPEND`` file, so
 a ``kill -9`` of the writer loses nothing it had written; ``fsync`` runs every
-``fsync_interval_s`` on a background thread, for power loss. A reader returns every complete chunk; a
+``fsync_interval_s`` on a background thread, for power loss. Disk trouble is a
+:class:`~radar_io.errors.StorageError` carrying the OS ``errno`` (ENOSPC → HTTP 507):
+a file that cannot get its header is closed and removed (no fd, no empty file left);
+a failed ``fsync`` is kept in ``fsync_error`` and raised by the next ``write``/``close``.
+``committed_bytes`` is the file size up to the last whole chunk: a download of an open
+recording sends exactly that many bytes. A reader returns every complete chunk; a
 torn tail (a chunk cut short by a crash) is reported and skipped, and a damaged
 chunk in the middle is counted and skipped by hunting for the next valid chunk.
 """
@@ -34,7 +39,10 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from radar_io import __version__
-from radar_io.errors import RecordingError
+import errno as _errno
+import logging
+
+from radar_io.errors import RecordingError, StorageError
 from radar_io.coordinates.transforms import Site
 from radar_io.wirespec.frame import FrameSpec
 from radar_io.textfiles import open_input
@@ -44,6 +52,16 @@ CHUNK_MAGIC = b"CHK1"
 _CHUNK_HEAD = struct.Struct(">4sQII")  # magic, t_ns, length, crc
 MAX_CHUNK = 16 << 20
 FORMAT = "rdrlog/1"
+
+log = logging.getLogger("radar_io.recording")
+
+
+def storage_error(what: str, path: str | os.PathLike[str], exc: OSError) -> StorageError:
+    """A StorageError naming the file and the OS reason, with its errno."""
+    reason = exc.strerror or str(exc)
+    if exc.errno == _errno.EFBIG:
+        reason = "file too large (size limit reached)"
+    return StorageError(f"{what} {path}: {reason}", errno=exc.errno)
 
 
 def is_recording(path: str | os.PathLike[str]) -> bool:
@@ -89,12 +107,23 @@ class RecordingWriter:
         except FileExistsError as exc:
             raise RecordingError(f"recording already exists, not overwriting: {self.path}") from exc
         except OSError as exc:
-            raise RecordingError(f"cannot create recording {self.path}: {exc.strerror}") from exc
+            raise storage_error("cannot create recording", self.path, exc) from exc
         hdr = json.dumps(self.header, sort_keys=True).encode()
-        self._write(FILE_MAGIC + struct.pack(">I", len(hdr)) + hdr + struct.pack(">I", zlib.crc32(hdr)))
-        os.fsync(self._fd)
+        try:
+            self._write(FILE_MAGIC + struct.pack(">I", len(hdr)) + hdr + struct.pack(">I", zlib.crc32(hdr)))
+            os.fsync(self._fd)
+        except OSError as exc:  # no room even for the header: leave neither fd nor file behind
+            os.close(self._fd)
+            self._fd = -1
+            try:
+                os.unlink(self.path)
+            except OSError:
+                pass
+            raise storage_error("cannot create recording", self.path, exc) from exc
+        self.committed_bytes = os.fstat(self._fd).st_size
         self.chunks = 0
         self.bytes = 0
+        self.fsync_error: StorageError | None = None
         # fsync on a thread of its own: a slow disk never holds up the writer (the reader)
         self._closing = threading.Event()
         self._syncer = threading.Thread(target=self._sync_loop, name="rdrlog-fsync", daemon=True)
@@ -102,15 +131,22 @@ class RecordingWriter:
 
     def _sync_loop(self) -> None:
         while not self._closing.wait(self.fsync_interval_s):
+            fd = self._fd
+            if fd < 0:
+                return
             try:
-                os.fsync(self._fd)
-            except OSError:
-                pass  # closed meanwhile, or the disk is failing: write() reports it
+                os.fsync(fd)
+            except OSError as exc:  # surfaced: logged now, raised by the next write / close
+                if fd == self._fd and self.fsync_error is None:
+                    self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
+                    log.error("%s", self.fsync_error)
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
         while view:
             n = os.write(self._fd, view)
+            if n == 0:
+                raise OSError(_errno.ENOSPC, os.strerror(_errno.ENOSPC))
             view = view[n:]
 
     def write(self, payload: bytes, t_ns: int | None = None) -> None:
@@ -121,23 +157,38 @@ class RecordingWriter:
             for k in range(0, len(payload), MAX_CHUNK):
                 self.write(payload[k:k + MAX_CHUNK], t_ns)
             return
+        if self.fsync_error is not None:
+            raise self.fsync_error
         t = time.time_ns() if t_ns is None else t_ns
+        chunk = encode_chunk(bytes(payload), t)
         try:
-            self._write(encode_chunk(bytes(payload), t))
+            self._write(chunk)
         except OSError as exc:
-            raise RecordingError(f"cannot write recording {self.path}: {exc.strerror}") from exc
+            try:  # a chunk written in part: cut it off so the file ends on a whole chunk
+                os.ftruncate(self._fd, self.committed_bytes)
+            except OSError:
+                pass
+            raise storage_error("cannot write recording", self.path, exc) from exc
         self.chunks += 1
         self.bytes += len(payload)
+        self.committed_bytes += len(chunk)
 
     def close(self) -> None:
+        """Stop the fsync thread, fsync and close; a failed fsync (now or earlier) raises
+        StorageError after the fd is closed."""
         if self._fd >= 0:
             self._closing.set()
             self._syncer.join()
             try:
                 os.fsync(self._fd)
+            except OSError as exc:
+                if self.fsync_error is None:
+                    self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
             finally:
                 os.close(self._fd)
                 self._fd = -1
+            if self.fsync_error is not None:
+                raise self.fsync_error
 
     @property
     def closed(self) -> bool:
@@ -197,8 +248,10 @@ class RecordingReader:
             raise RecordingError(f"{self.path}: header damaged or truncated")
         try:
             doc = json.loads(hdr)
-        except json.JSONDecodeError as exc:
+        except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
             raise RecordingError(f"{self.path}: header is not valid JSON") from exc
+        if not isinstance(doc, dict):
+            raise RecordingError(f"{self.path}: header is not a JSON object")
         if doc.get("format") != FORMAT:
             raise RecordingError(f"{self.path}: unsupported recording format {doc.get('format')!r}")
         return doc
@@ -278,6 +331,20 @@ class RecordingReader:
             return False
         payload = f.read(length)
         return len(payload) == length and _chunk_crc(t_ns, payload) == crc
+
+
+def iter_prefix(path: str | os.PathLike[str], size: int, piece: int = 1 << 20) -> Iterator[bytes]:
+    """The first ``size`` bytes of a file, in pieces: a snapshot of a recording still being
+    written (``size`` = :attr:`RecordingWriter.committed_bytes` at request time), so a
+    download's body always matches its Content-Length and is a prefix of the final file."""
+    with open(path, "rb") as f:
+        left = size
+        while left > 0:
+            b = f.read(min(piece, left))
+            if not b:
+                raise StorageError(f"{path}: shorter than its {size}-byte snapshot")
+            left -= len(b)
+            yield b
 
 
 def iter_payloads(path: str | os.PathLike[str], chunk_bytes: int = 1 << 22,

@@ -121,6 +121,8 @@ class Acquisition:
             if self._pending is not None:
                 self._swap_source()
             data = link.read(self.read_timeout_s)
+            if data and getattr(link.source, "discontinuous", False):
+                self._resync()  # replay seek: these bytes do not follow the previous ones
             if data:
                 try:
                     self._process(data, time.time_ns())
@@ -140,6 +142,15 @@ class Acquisition:
     @property
     def last_error(self) -> str | None:
         return self._link.last_error
+
+    def _resync(self) -> None:
+        """The stream jumped (replay seek): drop the framer's partial frame and SEQ memory
+        (counters kept) and count no sync edge on the first frame after the jump."""
+        self.framer.flush()  # the partial frame before the jump: counted as discarded
+        stats = self.framer.stats
+        self.framer = Framer(self.spec)
+        self.framer.stats = stats
+        self._last_sync = 1
 
     def _swap_source(self) -> None:
         (new, mode), self._pending = self._pending, None  # type: ignore[misc]

@@ -3,7 +3,7 @@
 air data) start and stop in the lifespan.
 
 Routers, one per concern (``service/routers/``): status, live (track, ws, site, path,
-airdata), recordings, replay, calibration, runway. Errors: one body shape, radar_io
+airdata), recordings, replay, calibration, coordinates, runway. Errors: one body shape, radar_io
 errors mapped by class (:mod:`radar_io.service.errors`). Origin, header and body limits:
 :mod:`radar_io.service.guard`.
 """
@@ -36,17 +36,22 @@ SWITCH_INTERVAL_S = 0.0005
 def build_app(cfg: ServiceConfig) -> FastAPI:
     """The service app for ``cfg``; refuses a configuration that can never work
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
-    from radar_io.service.routers import calibration, live, recordings, replay, runway, status
+    from radar_io.service.alarms import attach_alarms, status_loop
+    from radar_io.service.routers import (alarms, calibration, coordinates, live, recordings,
+                                          replay, report, runway, status)
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     state = ServiceState(cfg)
+    state.alarms = attach_alarms(state)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         state.start(asyncio.get_running_loop())
+        alarm_task = asyncio.create_task(status_loop(state, state.alarms))
         try:
             yield
         finally:
+            alarm_task.cancel()
             state.stop()
 
     app = FastAPI(title="radar_io", version=__version__, lifespan=lifespan,
@@ -57,7 +62,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
                   '`{"detail": [{"loc": [...], "msg": "...", "type": "..."}]}`.')
     app.state.service = state
     install_error_handlers(app)
-    for module in (status, live, recordings, replay, calibration):
+    for module in (status, live, recordings, replay, calibration, coordinates, alarms, report):
         app.include_router(module.router)
     # runway vision is the storage helper's router; it adds the control token itself
     app.include_router(runway.router, responses=responses(401, 403, 429))

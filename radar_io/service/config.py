@@ -37,6 +37,9 @@ class ServiceConfig:
     token_file: str | None = None
     auto_record: Literal["go", "manual", "always"] = "go"
     preroll_s: Annotated[float, Ge(0.0), Le(600.0)] = 2.0
+    retry_s: Annotated[float, Gt(0.0), Le(3600.0)] = 5.0  #: automatic recording: retry after a disk error
+    low_space_mb: Annotated[float, Ge(0.0)] = 1024.0      #: status storage.low_space below this free space
+    runway_queue: Annotated[int, Ge(0), Le(100)] = 2      #: runway video jobs waiting (429 beyond)
     history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)
     ws_queue_size: Annotated[int, Ge(1), Le(1_000_000)] = 5000  #: per client; oldest skipped beyond
     ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
@@ -52,6 +55,12 @@ class ServiceConfig:
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file
     can: str | None = None           #: aircraft air data: python-can "interface:channel"
     can_bitrate: Annotated[int, Gt(0)] | None = None
+    publish: str | None = None       #: MQTT: mqtt[s]://HOST:PORT/PREFIX[?qos=0|1] (sinks/mqtt.py)
+    mqtt_user: str | None = None     #: or RADAR_IO_MQTT_USER; never printed
+    mqtt_password: str | None = None  #: or RADAR_IO_MQTT_PASSWORD; never printed
+    mqtt_ca_file: str | None = None  #: mqtts:// CA bundle (default: the system's CAs)
+    asterix_out: str | None = None   #: ASTERIX CAT048: udp://host:port, a serial URL/device or a file
+    alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:
         if self.site:

@@ -66,10 +66,15 @@ class Client:
     def push(self, block: Block) -> None:
         """Queue a block (event-loop thread); skip the oldest beyond ``queue_size`` messages."""
         q = self.queue
-        if self.min_interval:  # decimated: only the newest matters
+        if block.first < 0:  # an event (alarm): always queued, never decimated
+            q.append(block)
+            self.queued += len(block.items)
+        elif self.min_interval:  # decimated: only the newest matters (queued events stay)
+            events = [b for b in q if b.first < 0]
             q.clear()
+            q.extend(events)
             q.append(Block([block.items[-1]]))
-            self.queued = 1
+            self.queued = len(events) + 1
         else:
             q.append(block)
             self.queued += len(block.items)
@@ -101,6 +106,10 @@ class Client:
                     return
 
     async def _send_block(self, b: Block) -> None:
+        if b.first < 0:  # an event, outside the numbered history: one text frame each
+            for _, text in b.items:
+                await self._send_text(text)
+            return
         if b.last <= self.last_sent:
             return
         if b.first <= self.last_sent or not self.batch:  # overlaps the backfill / one by one
@@ -194,6 +203,22 @@ class Hub:
                 loop.call_soon_threadsafe(self._dispatch)
         except RuntimeError:  # loop closing at shutdown
             pass
+
+    def publish_event_threadsafe(self, text: str) -> None:
+        """Push one un-numbered message (an alarm) to every client at once; not in the
+        history, never decimated. Any thread."""
+        loop = self.loop
+        if loop is None or loop.is_closed():
+            return
+        try:
+            loop.call_soon_threadsafe(self._dispatch_event, text)
+        except RuntimeError:  # loop closing at shutdown
+            pass
+
+    def _dispatch_event(self, text: str) -> None:
+        block = Block([(-1, text)])
+        for c in self.clients:
+            c.push(block)
 
     def _dispatch(self) -> None:
         with self._lock:

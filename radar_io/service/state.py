@@ -60,7 +60,10 @@ class ServiceState:
         self.hub = Hub(self.history, cfg.ws_queue_size, cfg.ws_max_clients,
                        cfg.ws_batch_interval_s)
         self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
-                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s)
+                                 auto=cfg.auto_record, preroll_s=cfg.preroll_s,
+                                 retry_s=cfg.retry_s,  # storage: retry after a disk error
+                                 low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
+        self.runway_jobs: Any = None  # storage: RunwayJobs, created by the runway router
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
@@ -97,6 +100,16 @@ class ServiceState:
             from radar_io.sinks.uplink import DASink
 
             self._sink_defs["da"] = DASink(cfg.da_out)
+        if cfg.asterix_out:  # interchange: ASTERIX CAT048 (sinks/asterix.py)
+            from radar_io.sinks.asterix import service_sink
+
+            self._sink_defs["asterix"] = service_sink(self, cfg.asterix_out)
+        self.mqtt: Any = None
+        if cfg.publish:  # interchange: MQTT track, status and sync events (sinks/mqtt.py)
+            from radar_io.sinks.mqtt import attach_to_service
+
+            self.mqtt = attach_to_service(self, cfg.publish, username=cfg.mqtt_user,
+                                          password=cfg.mqtt_password, ca_file=cfg.mqtt_ca_file)
         if cfg.can:
             from radar_io.sources.airdata import AirDataReader
 
@@ -115,14 +128,20 @@ class ServiceState:
             self.acq.processors.append(w.submit)
         if self.air is not None:
             self.air.start()
+        if self.mqtt is not None:
+            self.mqtt.start()  # never waits for the broker
         self.acq.start()
 
     def stop(self) -> None:
         """Stop the reader, close the recording, stop the sinks and the air-data reader."""
         self.acq.stop()
         self.recorder.close()
+        if self.runway_jobs is not None:  # storage: cancel runway jobs, remove their spool
+            self.runway_jobs.close()
         for w in self.sinks.values():
             w.close()
+        if self.mqtt is not None:
+            self.mqtt.close()  # last word on PREFIX/status: {"online": false}
         if self.air is not None:
             self.air.close()
 
@@ -161,6 +180,7 @@ class ServiceState:
         st = self.acq.status()
         st.update(self.hub.stats())
         st["recording"] = self.recorder.current
+        st["storage"] = self.recorder.storage()  # storage: free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.acq.calibration.id
         st["control_enabled"] = self.token is not None
@@ -171,6 +191,7 @@ class ServiceState:
         st["instance"] = self.instance
         st["path"] = self.cfg.path
         st["uplink"] = {k: w.stats() for k, w in self.sinks.items()}
+        st["publish"] = {"mqtt": self.mqtt.stats()} if self.mqtt is not None else {}
         st["airdata"] = self.air.stats() if self.air is not None else None
         return st
 

@@ -8,6 +8,7 @@ that kind is opened. Every sink implements :class:`~radar_io.sinks.base.Sink`
 from __future__ import annotations
 
 import importlib
+import os
 from typing import Any
 
 from radar_io.errors import ValidationError
@@ -17,7 +18,43 @@ from radar_io.sinks.base import Batch, Sink
 SINKS: dict[str, str] = {
     "tlm1": "radar_io.sinks.uplink:TelemetrySink",
     "da": "radar_io.sinks.uplink:DASink",
+    "asterix": "radar_io.sinks.asterix:AsterixSink",
+    "mqtt": "radar_io.sinks.mqtt:MqttSink",
+    "ast": "radar_io.sinks.asterix:AsterixFileWriter",   # decode -o OUT.ast (not a table)
 }
+
+
+#: table file format → "module:class(target, metadata=…)" (see :mod:`radar_io.sinks.table`)
+TABLE_FORMATS: dict[str, str] = {
+    "csv": "radar_io.sinks.table_csv:CsvTableWriter",
+    "jsonl": "radar_io.sinks.table_jsonl:JsonlTableWriter",
+    "parquet": "radar_io.sinks.table_parquet:ParquetTableWriter",
+    "arrow": "radar_io.sinks.table_arrow:ArrowTableWriter",
+}
+#: file extension → table format
+TABLE_EXTENSIONS: dict[str, str] = {
+    ".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".json": "jsonl",
+    ".parquet": "parquet", ".pq": "parquet", ".arrow": "arrow", ".feather": "arrow",
+    ".ipc": "arrow",
+}
+# each table format is also a sink kind (a file sink: written, finished on close)
+SINKS.update(TABLE_FORMATS)
+
+
+def table_format(target: str | None, fmt: str | None = None) -> str:
+    """The table format: ``fmt`` if given, else from ``target``'s extension, else ``csv``."""
+    if fmt:
+        if fmt not in TABLE_FORMATS:
+            raise ValidationError(f"unknown table format {fmt!r} "
+                                  f"(known: {', '.join(TABLE_FORMATS)})")
+        return fmt
+    ext = os.path.splitext(target or "")[1].lower()
+    return TABLE_EXTENSIONS.get(ext, "csv")
+
+
+def open_table(target: str, fmt: str | None = None, **options: Any) -> Sink:
+    """A table writer for ``target`` (``"-"``: stdout) in ``fmt`` or the extension's format, opened."""
+    return open_sink(table_format(target, fmt), target, **options)
 
 
 def sink_class(kind: str) -> type[Sink]:
@@ -37,4 +74,5 @@ def open_sink(kind: str, target: str, **options: Any) -> Sink:
     return sink
 
 
-__all__ = ["Batch", "SINKS", "Sink", "open_sink", "sink_class"]
+__all__ = ["Batch", "SINKS", "Sink", "TABLE_EXTENSIONS", "TABLE_FORMATS", "open_sink",
+           "open_table", "sink_class", "table_format"]

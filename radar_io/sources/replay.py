@@ -23,6 +23,10 @@ class ReplaySource:
 
     ``speed`` multiplies the recorded pace (``0`` = as fast as possible). Step
     delivers the next recorded chunk (one read of the original port) while paused.
+
+    After a :meth:`seek` the next bytes do not follow the previous ones: the read that
+    delivers them sets :attr:`discontinuous`, and the acquisition then resets its framer
+    and edge state (no SEQ gap, no sync / GO edge counted across the jump).
     """
 
     def __init__(self, path: Path, speed: float = 1.0) -> None:
@@ -41,6 +45,9 @@ class ReplaySource:
         self._i = 0
         self._anchor: tuple[float, int] | None = None  # (monotonic, t_ns) pacing reference
         self._f: Any = None
+        self._jumped = False        #: a seek happened since the last delivered chunk
+        self.discontinuous = False  #: the last read()'s bytes do not follow the previous read's
+        self.seeks = 0
 
     @property
     def duration_s(self) -> float:
@@ -66,6 +73,7 @@ class ReplaySource:
         except OSError as exc:
             raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from exc
         self._anchor = None
+        self._jumped = self.discontinuous = False
 
     def close(self) -> None:
         if self._f is not None:
@@ -108,6 +116,8 @@ class ReplaySource:
                     hi = mid
             self._i = lo
             self._anchor = None
+            self._jumped = True
+            self.seeks += 1
 
     def read(self, timeout_s: float) -> bytes:
         if self._f is None:
@@ -129,6 +139,7 @@ class ReplaySource:
                     self._i += 1
                     if stepping:
                         self._steps -= 1
+                    self.discontinuous, self._jumped = self._jumped, False
         if entry is None or wait > 0:
             time.sleep(min(max(wait, 0.0), timeout_s))
             return b""

@@ -1,15 +1,21 @@
 """Serial devices and every pyserial URL (``/dev/ttyUSB0?baudrate=115200``, ``loop://``,
 ``socket://host:port``, ``rfc2217://…``): the default source for a URL with no scheme of
-our own."""
+our own.
+
+FTDI-style USB adapters hold received bytes up to their latency timer (16 ms by default)
+before sending them to the host: the port is opened in low-latency mode where the driver
+supports it (``deploy/99-radar.rules`` also sets the FTDI ``latency_timer`` to 1 ms)."""
 
 from __future__ import annotations
 
+import logging
 import os
 import urllib.parse
 from typing import Any
 
 from radar_io.errors import SourceError
 
+log = logging.getLogger("radar_io.sources")
 
 #: query parameters that set up the port (the rest stay with pyserial's URL handler)
 _PORT_KEYS = {"baudrate": int, "bytesize": int, "stopbits": float, "parity": str,
@@ -62,7 +68,27 @@ def open_port(url: str, timeout_s: float = 0.05) -> Any:
         port.open()
     except (serial.SerialException, OSError, ValueError) as exc:
         raise SourceError(f"cannot open {url}: {exc}") from exc
+    request_low_latency(port, url)
     return port
+
+
+def request_low_latency(port: Any, url: str) -> bool:
+    """Ask the driver for low-latency reads (ASYNC_LOW_LATENCY; pyserial on Linux).
+
+    True when granted. A port or platform without it (a pty, ``loop://``, ``socket://``,
+    Windows) is not an error: one log line says so and the port is used as it is.
+    """
+    setter = getattr(port, "set_low_latency_mode", None)
+    if setter is None:
+        log.info("serial %s: low-latency mode not available for this port type", url)
+        return False
+    try:
+        setter(True)
+    except (ValueError, OSError, NotImplementedError) as exc:
+        log.info("serial %s: low-latency mode not set (%s)", url, exc)
+        return False
+    log.info("serial %s: low-latency mode on", url)
+    return True
 
 
 class SerialSource:

@@ -2,8 +2,12 @@
 
 Per frame we use the standard library's ``binascii.crc_hqx`` (CRC-16/CCITT,
 poly 0x1021, any init) when the spec asks for that polynomial; the batch path
-uses a 65536-entry table that advances the register by 16 bits in one lookup,
-derived from the same byte-wise definition.
+uses 65536-entry tables derived from the same byte-wise definition:
+:func:`word_table` advances the register by one 16-bit word, and
+:func:`position_tables` give, for a message of fixed length, each word
+position's own contribution, since a CRC without reflection is affine in the
+message bits: ``crc = c0 ^ T_1[w_1] ^ T_2[w_2] ^ … ^ T_n[w_n]`` (independent
+lookups, no register carried from word to word).
 """
 
 from __future__ import annotations
@@ -57,3 +61,27 @@ def word_table(poly: int) -> np.ndarray:
     r1 = t8[v >> 8]                                  # after the high byte
     r2 = ((r1 << 8) & 0xFFFF) ^ t8[(r1 >> 8) ^ (v & 0xFF)]
     return r2.astype(np.uint16)
+
+
+@lru_cache(maxsize=8)
+def position_tables(poly: int, init: int, xor_out: int, first_word: int, nwords: int
+                    ) -> tuple[int, tuple[np.ndarray, ...]]:
+    """``(c0, (T_1 … T_{nwords-1}))`` for messages of ``nwords`` 16-bit words whose word 0 is
+    always ``first_word`` (the sync word): ``crc = c0 ^ T_1[w_1] ^ … ^ T_{n-1}[w_{n-1}]``.
+
+    ``T_k[v]`` is the register contribution of word ``v`` at position ``k``: the word
+    table advanced through the ``nwords - 1 - k`` words that follow (zeros add nothing
+    but shifts). ``c0`` is the CRC of the message holding only ``first_word`` at
+    position 0 and zeros elsewhere, ``init`` and ``xor_out`` included.
+    """
+    t = word_table(poly)
+    tables: list[np.ndarray] = []
+    cur = t.copy()
+    for _ in range(1, nwords):       # T_{n-1} = t, T_{n-2} = t advanced once, ...
+        tables.append(cur)
+        cur = t.take(cur)
+    tables.reverse()
+    reg = init
+    for v in (first_word, *([0] * (nwords - 1))):
+        reg = int(t[reg ^ v])
+    return reg ^ xor_out, tuple(tables)

@@ -215,6 +215,40 @@ class FrameSpec:
         raise SpecError(f"{self.path}: no status flag named {name!r}")
 
 
+#: every key a frame spec file may hold, per table; anything else is refused (a typo is an error)
+ALLOWED_KEYS: dict[str, frozenset[str]] = {
+    "": frozenset({"frame", "crc", "field", "status"}),
+    "frame": frozenset({"name", "spec_version", "length_bytes", "byte_order", "sync_word",
+                        "sync_offset"}),
+    "crc": frozenset({"name", "width", "poly", "init", "reflect_in", "reflect_out", "xor_out",
+                      "check", "offset"}),
+    "field": frozenset({"name", "offset", "size", "encoding", "bits", "lsb", "unit", "column",
+                        "max_raw", "description"}),
+    "status": frozenset({"field", "bit_numbering", "flag"}),
+    "flag": frozenset({"name", "bit", "width", "description"}),
+}
+
+
+def check_keys(table: dict[str, Any], allowed: frozenset[str], where: str) -> None:
+    """SpecError naming the first key of ``table`` that is not in ``allowed``."""
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise SpecError(f"{where}: unknown key {unknown[0]!r} (allowed: {', '.join(sorted(allowed))})")
+
+
+def _opt(table: dict[str, Any], key: str, typ: type | tuple[type, ...], where: str,
+         default: Any) -> Any:
+    """``table[key]`` checked like :func:`_req`, or ``default`` when absent."""
+    return _req(table, key, typ, where) if key in table else default
+
+
+def _table_list(doc: dict[str, Any], key: str, where: str) -> list[dict[str, Any]]:
+    v = doc.get(key, [])
+    if not isinstance(v, list) or not all(isinstance(t, dict) for t in v):
+        raise SpecError(f"{where}: {key!r} must be an array of tables ([[{key}]])")
+    return v
+
+
 def _req(table: dict[str, Any], key: str, typ: type | tuple[type, ...], where: str) -> Any:
     if key not in table:
         raise SpecError(f"{where}: missing key {key!r}")
@@ -249,14 +283,21 @@ def _load_spec_cached(path: str, _mtime_ns: int) -> FrameSpec:
 
 
 def _build_spec(doc: dict[str, Any], path: str, sha: str) -> FrameSpec:
+    check_keys(doc, ALLOWED_KEYS[""], path)
     fr = _req(doc, "frame", dict, path)
     where = f"{path} [frame]"
+    check_keys(fr, ALLOWED_KEYS["frame"], where)
     length = _req(fr, "length_bytes", int, where)
+    if not 4 <= length <= 4096 or length % 2:
+        raise SpecError(f"{where}: length_bytes must be an even number of bytes, 4 .. 4096")
     byte_order = _req(fr, "byte_order", str, where)
-    if byte_order not in ("big", "little"):
-        raise SpecError(f"{where}: byte_order must be 'big' or 'little'")
+    if byte_order != "big":
+        raise SpecError(f"{where}: byte_order = {byte_order!r} is not supported: the framers, "
+                        "decoders and encoders read big-endian words only")
     sync_word = _req(fr, "sync_word", int, where)
-    sync_offset = int(fr.get("sync_offset", 0))
+    sync_offset = _opt(fr, "sync_offset", int, where, 0)
+    for key in ("name", "spec_version"):
+        _opt(fr, key, str, where, "")
     if sync_offset != 0:
         raise SpecError(f"{where}: the sync word must start the frame (sync_offset = 0)")
     if not 0 < sync_word <= 0xFFFF:
@@ -264,8 +305,9 @@ def _build_spec(doc: dict[str, Any], path: str, sha: str) -> FrameSpec:
 
     c = _req(doc, "crc", dict, path)
     where = f"{path} [crc]"
+    check_keys(c, ALLOWED_KEYS["crc"], where)
     crc = CrcSpec(
-        name=str(c.get("name", "crc")),
+        name=_opt(c, "name", str, where, "crc"),
         width=_req(c, "width", int, where),
         poly=_req(c, "poly", int, where),
         init=_req(c, "init", int, where),
@@ -281,73 +323,79 @@ def _build_spec(doc: dict[str, Any], path: str, sha: str) -> FrameSpec:
         raise SpecError(f"{where}: the CRC word must be the last two bytes of the frame")
 
     fields: list[FieldSpec] = []
-    occupied = bytearray(length)
-    occupied[0:2] = b"\x01\x01"
-    occupied[crc.offset:crc.offset + 2] = b"\x01\x01"
-    for i, f in enumerate(doc.get("field", [])):
+    owner: list[str] = [""] * length   # which word holds each byte
+    owner[0:2] = ["the sync word"] * 2
+    owner[crc.offset:crc.offset + 2] = ["the CRC"] * 2
+    for i, f in enumerate(_table_list(doc, "field", path)):
         where = f"{path} [[field]] #{i + 1}"
         name = _req(f, "name", str, where)
         where = f"{path} field {name!r}"
+        check_keys(f, ALLOWED_KEYS["field"], where)
         size = _req(f, "size", int, where)
         if size not in (1, 2, 4):
             raise SpecError(f"{where}: size must be 1, 2 or 4 bytes")
         offset = _req(f, "offset", int, where)
         if offset < 0 or offset + size > length:
             raise SpecError(f"{where}: offset {offset}+{size} lies outside the {length}-byte frame")
-        if any(occupied[offset:offset + size]):
-            raise SpecError(f"{where}: overlaps another field, the sync word or the CRC")
-        occupied[offset:offset + size] = b"\x01" * size
+        taken = next((o for o in owner[offset:offset + size] if o), "")
+        if taken:
+            raise SpecError(f"{where}: bytes {offset}..{offset + size - 1} overlap {taken}")
+        owner[offset:offset + size] = [f"field {name!r}"] * size
         enc = _req(f, "encoding", str, where)
         if enc not in ENCODINGS:
             raise SpecError(f"{where}: encoding {enc!r} is not one of {', '.join(ENCODINGS)}")
-        bits = int(f.get("bits", 8 * size))
+        bits = _opt(f, "bits", int, where, 8 * size)
         if not 1 <= bits <= 8 * size:
             raise SpecError(f"{where}: bits must be 1..{8 * size}")
         lsb = eval_number(_req(f, "lsb", (int, float, str), where), what=f"{where} lsb")
         if not (math.isfinite(lsb) and lsb > 0):
             raise SpecError(f"{where}: lsb must be a positive finite number")
-        max_raw = f.get("max_raw")
-        if max_raw is not None and not isinstance(max_raw, int):
-            raise SpecError(f"{where}: max_raw must be an integer")
+        max_raw = _opt(f, "max_raw", int, where, None)
+        if max_raw is not None and max_raw < 0:
+            raise SpecError(f"{where}: max_raw must be >= 0")
         fields.append(FieldSpec(
             name=name, offset=offset, size=size, encoding=enc, bits=bits, lsb=lsb,
-            unit=str(f.get("unit", "")), column=str(f.get("column", name)),
-            max_raw=max_raw, description=str(f.get("description", "")),
+            unit=_opt(f, "unit", str, where, ""), column=_opt(f, "column", str, where, name),
+            max_raw=max_raw, description=_opt(f, "description", str, where, ""),
         ))
     names = [f.name for f in fields]
     if len(set(names)) != len(names):
-        raise SpecError(f"{path}: duplicate field names")
+        dup = next(n for n in names if names.count(n) > 1)
+        raise SpecError(f"{path} field {dup!r}: declared twice")
     missing = [n for n in REQUIRED_FIELDS if n not in names]
     if missing:
         raise SpecError(f"{path}: missing required field(s) {', '.join(missing)}")
 
     st = _req(doc, "status", dict, path)
     where = f"{path} [status]"
+    check_keys(st, ALLOWED_KEYS["status"], where)
     status_field = _req(st, "field", str, where)
     sts = next((f for f in fields if f.name == status_field), None)
     if sts is None:
         raise SpecError(f"{where}: status field {status_field!r} is not declared")
-    numbering = st.get("bit_numbering", "msb0")
+    numbering = _opt(st, "bit_numbering", str, where, "msb0")
     if numbering not in ("msb0", "lsb0"):
         raise SpecError(f"{where}: bit_numbering must be 'msb0' (B0 = MSB) or 'lsb0'")
     nbits = 8 * sts.size
     flags: list[FlagSpec] = []
     used = 0
-    for i, fl in enumerate(st.get("flag", [])):
+    for i, fl in enumerate(_table_list(st, "flag", where)):
         fw = f"{where} flag #{i + 1}"
         name = _req(fl, "name", str, fw)
+        fw = f"{where} flag {name!r}"
+        check_keys(fl, ALLOWED_KEYS["flag"], fw)
         bit = _req(fl, "bit", int, fw)
-        width = int(fl.get("width", 1))
+        width = _opt(fl, "width", int, fw, 1)
         if width < 1 or bit < 0 or bit + width > nbits:
-            raise SpecError(f"{fw} ({name}): bits B{bit}..B{bit + width - 1} outside the {nbits}-bit word")
+            raise SpecError(f"{fw}: bits B{bit}..B{bit + width - 1} outside the {nbits}-bit word")
         # msb0: B0 is the MSB; a flag spans B<bit>..B<bit+width-1>, its lowest bit is B<bit+width-1>
         shift = nbits - (bit + width) if numbering == "msb0" else bit
         mask = ((1 << width) - 1) << shift
         if used & mask:
-            raise SpecError(f"{fw} ({name}): overlaps another status flag")
+            raise SpecError(f"{fw}: overlaps another status flag")
         used |= mask
         flags.append(FlagSpec(name=name, bit=bit, width=width, shift=shift, mask=mask,
-                              description=str(fl.get("description", ""))))
+                              description=_opt(fl, "description", str, fw, "")))
     fnames = [f.name for f in flags]
     missing = [n for n in REQUIRED_FLAGS if n not in fnames]
     if missing:

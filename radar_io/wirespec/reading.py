@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from radar_io.errors import SpecError
-from radar_io.wirespec.frame import CrcSpec, eval_number, spec_dir
+from radar_io.wirespec.frame import ALLOWED_KEYS, CrcSpec, check_keys, eval_number, spec_dir
 from radar_io.textfiles import parse_toml, read_text
 
 
@@ -41,6 +41,11 @@ def positive(table: dict[str, Any], key: str, where: str, default: Any = None) -
     return v
 
 
+def keys(table: dict[str, Any], allowed: str, where: str) -> None:
+    """SpecError on a key of ``table`` not among the space-separated ``allowed`` names."""
+    check_keys(table, frozenset(allowed.split()), where)
+
+
 def tables(doc: dict[str, Any], key: str, where: str) -> list[dict[str, Any]]:
     v = doc.get(key)
     if not isinstance(v, list) or not v or not all(isinstance(t, dict) for t in v):
@@ -54,6 +59,7 @@ def crc_spec(doc: dict[str, Any], path: str) -> CrcSpec:
 
     c = req(doc, "crc", dict, path)
     where = f"{path} [crc]"
+    check_keys(c, ALLOWED_KEYS["crc"], where)
     crc = CrcSpec(
         name=str(c.get("name", "crc")),
         width=req(c, "width", int, where), poly=req(c, "poly", int, where),

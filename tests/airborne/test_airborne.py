@@ -66,10 +66,10 @@ def test_dbc_errors(tmp_path):
     text = (ROOT / "firmware_specs" / "airdata.dbc").read_text()
     f = tmp_path / "x.dbc"
     f.write_text(text.replace("BO_ 259 DME: 8 DAU", "BO_ 259 DMEX: 8 DAU"))
-    with pytest.raises(AirborneError, match="no message DME"):
+    with pytest.raises(AirborneError, match="message DME: missing"):
         load_dbc(f)
     f.write_text(text.replace("SG_ ShutterTime", "SG_ ShutterTick"))
-    with pytest.raises(AirborneError, match="lacks signal"):
+    with pytest.raises(AirborneError, match="message SHUTTER_EVENT: missing signal"):
         load_dbc(f)
     with pytest.raises(AirborneError, match="not found"):
         load_dbc(tmp_path / "none.dbc")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
@@ -13,16 +14,26 @@ THETA = np.array([0.0, -20.0, -15.0, -10.0, -5.0, 5.0, 10.0, 15.0, 20.0, 25.0])
 
 
 def _targets(dtheta_deg, focal, pc, k3=0.0, offset_deg=0.0):
-    u = focal * np.tan(np.radians(THETA - dtheta_deg))
-    return THETA + offset_deg, pc + u + k3 * u**3
+    """Film x (mm) of a collimator target (a point at infinity straight ahead) seen by a camera
+    turned by θ on the table, imaged by OpenCV: K = [[F, 0, P_c], [0, F, 0], [0, 0, 1]] and
+    radial distortion k1 = k3·F² (OpenCV's x(1 + k1 x²) on normalised x is u + k3 u³ in mm)."""
+    k = np.array([[focal, 0.0, pc], [0.0, focal, 0.0], [0.0, 0.0, 1.0]])
+    dist = np.array([k3 * focal**2, 0.0, 0.0, 0.0])
+    x = []
+    for a in np.radians(THETA - dtheta_deg):
+        img, _ = cv2.projectPoints(np.array([[0.0, 0.0, 1e9]]), np.array([0.0, a, 0.0]),
+                                   np.zeros(3), k, dist)
+        x.append(img[0, 0, 0])
+    return THETA + offset_deg, np.array(x)
 
 
-def test_focal_length_formula():
-    theta, film = _targets(0.37, 40.25, 0.12)
-    f = focal_lengths(theta, film, 0.37)
-    t, d = np.radians(THETA[1:]), np.radians(0.37)
-    np.testing.assert_allclose(f, (film[1:] - film[0]) / (np.tan(t - d) + np.tan(d)), rtol=1e-12)
-    np.testing.assert_allclose(f, 40.25, rtol=1e-12)
+def test_focal_lengths_of_opencv_targets():
+    """The per-target focal lengths (4-x) equal the F OpenCV imaged with, for several Δθ, P_c."""
+    for dtheta, focal, pc in ((0.37, 40.25, 0.12), (-1.2, 150.0, -0.4), (0.0, 35.0, 0.0)):
+        theta, film = _targets(dtheta, focal, pc)
+        np.testing.assert_allclose(focal_lengths(theta, film, dtheta), focal, rtol=1e-9)
+        # a wrong Δθ gives focal lengths that differ from target to target
+        assert np.std(focal_lengths(theta, film, dtheta + 0.05)) > 1e-3
 
 
 @pytest.mark.parametrize("offset", [0.0, 12.3])

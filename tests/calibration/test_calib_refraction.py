@@ -19,26 +19,37 @@ from .synthetic import FOCAL_MM, aerial_photo
 FT = 0.3048
 
 
-def test_delta_is_the_formula():
-    ha, hi = 3000 * FT / 1000, 0.0  # km
-    assert refraction_delta(3000 * FT, 0.0) == pytest.approx((1.2 * ha - 0.38 * ha**2) * 1e-3, rel=1e-14)
-    ha, hi = 1.5, 0.2
-    expected = (1 - 0.06 * hi) * (1.2 * (ha - hi) - 0.38 * (ha - hi) ** 2) * 1e-3
-    assert refraction_delta(1500.0, 200.0) == pytest.approx(expected, rel=1e-14)
+# δ of calibration.md §5 worked out by hand (heights in km):
+#   H_a 1.0, H_i 0.0: 1.2·1.0 − 0.38·1.0                      = 0.82      → 0.82e-3
+#   H_a 1.5, H_i 0.2: (1 − 0.012)(1.2·1.3 − 0.38·1.69)         = 0.9067864 → 0.9067864e-3
+#   H_a 2.0, H_i 0.5: (1 − 0.03)(1.2·1.5 − 0.38·2.25)          = 0.91665   → 0.91665e-3
+#   H_a 3.0, H_i 0.0: 3.6 − 3.42                               = 0.18      → 0.18e-3
+HAND = [(1000.0, 0.0, 0.82e-3), (1500.0, 200.0, 0.9067864e-3), (2000.0, 500.0, 0.91665e-3),
+        (3000.0, 0.0, 0.18e-3)]
 
 
-def test_points_move_inward_by_dr():
-    film = np.array([[10.0, 0.0], [-12.0, 16.0], [0.0, 0.0], [27.5, -27.5]])
-    delta = refraction_delta(900.0, 30.0)
-    out = correct_refraction(film, FOCAL_MM, 900.0, 30.0)
-    r = np.hypot(film[:, 0], film[:, 1])
-    dr = r * (r**2 / FOCAL_MM**2 + 1) * delta
-    np.testing.assert_allclose(refraction_displacement_mm(r, FOCAL_MM, delta), dr)
-    np.testing.assert_allclose(r - np.hypot(out[:, 0], out[:, 1]), dr, atol=1e-15)
-    np.testing.assert_allclose(out[2], [0.0, 0.0])
-    # direction kept: the corrected point is on the same ray from the principal point
-    np.testing.assert_allclose(film[:, 0] * out[:, 1] - film[:, 1] * out[:, 0], 0.0, atol=1e-12)
-    assert dr[3] == pytest.approx(27.5 * np.sqrt(2) * (2 * 27.5**2 / 1600 + 1) * delta)
+@pytest.mark.parametrize("ha, hi, delta", HAND)
+def test_delta_matches_values_worked_by_hand(ha, hi, delta):
+    assert refraction_delta(ha, hi) == pytest.approx(delta, rel=1e-12)
+
+
+def test_displacement_is_the_first_order_shift_of_a_bent_ray():
+    """Independent statement: a ray at angle θ off the axis (r = F tan θ) bent towards the axis
+    by δ·tan θ lands at F tan(θ − δ tan θ); dr = r (r²/F² + 1) δ is that shift to first order
+    in δ, so the two differ by O(δ² tan² θ) ≈ 2·10⁻³ of dr at most for δ ≈ 0.9·10⁻³, θ ≤ 45°."""
+    delta = refraction_delta(1500.0, 200.0)
+    r = np.linspace(0.5, FOCAL_MM, 40)                     # up to 45° off the axis
+    theta = np.arctan(r / FOCAL_MM)
+    exact = r - FOCAL_MM * np.tan(theta - delta * np.tan(theta))
+    np.testing.assert_allclose(refraction_displacement_mm(r, FOCAL_MM, delta), exact, rtol=2.5e-3)
+    # and correct_refraction moves each film point along its own ray to that radius
+    ang = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    film = np.column_stack([r * np.cos(ang), r * np.sin(ang)])
+    out = correct_refraction(film, FOCAL_MM, 1500.0, 200.0)
+    np.testing.assert_allclose(np.hypot(out[:, 0], out[:, 1]), r - exact, rtol=1e-5)
+    np.testing.assert_allclose(np.arctan2(out[:, 1], out[:, 0]), np.arctan2(film[:, 1], film[:, 0]),
+                               atol=1e-12)
+    np.testing.assert_allclose(correct_refraction(np.zeros((1, 2)), FOCAL_MM, 1500.0, 200.0), 0.0)
 
 
 def test_correction_raises_the_solved_height_at_3000_ft():

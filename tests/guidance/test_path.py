@@ -246,7 +246,7 @@ PTS = "[[points]]\nx_m = 0.0\ny_m = 0.0\nh_m = 100.0\n"
 
 
 @pytest.mark.parametrize("text, message", [
-    ('frame = "radar"\nturn_radius_m = 1000.0\n' + PTS, "at least 2 pass points"),
+    ('frame = "radar"\nturn_radius_m = 1000.0\n' + PTS, "field points: expected at least 2 entries, got 1"),
     ('frame = "radar"\nturn_radius_m = 1000.0\n' + PTS + PTS, "same horizontal position"),
     ('frame = "radar"\nturn_radius_m = 5000.0\n' + PTS +
      "[[points]]\nx_m = 3000.0\ny_m = 0.0\nh_m = 1.0\n[[points]]\nx_m = 3000.0\ny_m = 3000.0\nh_m = 1.0\n",
@@ -255,14 +255,14 @@ PTS = "[[points]]\nx_m = 0.0\ny_m = 0.0\nh_m = 100.0\n"
      "[[points]]\nx_m = 3000.0\ny_m = 0.0\nh_m = 1.0\n[[points]]\nx_m = 1000.0\ny_m = 0.0\nh_m = 1.0\n",
      "reverses direction"),
     ('frame = "radar"\nturn_radius_m = 1000.0\n[[points]]\nx_m = "north"\ny_m = 0.0\nh_m = 1.0\n' + PTS,
-     "x_m must be a finite number"),
-    ('frame = "radar"\nturn_radius_m = -5.0\n' + PTS + PTS, "turn_radius_m must be a positive"),
+     "field points[0].x_m: expected a number, got a string 'north'"),
+    ('frame = "radar"\nturn_radius_m = -5.0\n' + PTS + PTS, "field turn_radius_m: -5.0 is out of range"),
     ('frame = "radar"\nturn_radius_m = 1000.0\n[[points]]\nx_m = 1.0\ny_m = 0.0\nz_m = 1.0\n' + PTS,
-     "unknown key(s) z_m"),
-    ('frame = "geodetic"\nturn_radius_m = 1000.0\n' + PTS + PTS, "frame must be"),
-    ('turn_radius_m = 1000.0\n' + PTS + PTS, "frame must be"),
-    ('frame = "radar"\n' + PTS + PTS, "missing turn_radius_m"),
-    ('frame = "radar"\nturn_radius_m = 1000.0\npoints = 3\n', "expected [[points]]"),
+     "field points[0].z_m: unknown key"),
+    ('frame = "geodetic"\nturn_radius_m = 1000.0\n' + PTS + PTS, "field frame: expected 'radar' or 'runway'"),
+    ('turn_radius_m = 1000.0\n' + PTS + PTS, "field frame: missing"),
+    ('frame = "radar"\n' + PTS + PTS, "field turn_radius_m: missing"),
+    ('frame = "radar"\nturn_radius_m = 1000.0\npoints = 3\n', "field points: expected an array of tables"),
     ("frame = = 1\n", "is not valid TOML"),
 ])
 def test_bad_path_files(tmp_path, text, message):

@@ -32,7 +32,16 @@ class Chrome:
         self.proc = subprocess.Popen([chromium_path(), *FLAGS, f"--user-data-dir={user_data_dir}",
                                       "about:blank"], stdout=subprocess.DEVNULL,
                                      stderr=subprocess.DEVNULL)
-        port_file = user_data_dir / "DevToolsActivePort"
+        self._conn: Any = None
+        try:
+            self._connect(user_data_dir / "DevToolsActivePort")
+        except BaseException:
+            self._stop_process()  # never leave a browser behind when starting fails
+            raise
+        self._id = 0
+        self.console: list[dict[str, Any]] = []  # console messages and exceptions seen
+
+    def _connect(self, port_file: Path) -> None:
         deadline = time.monotonic() + 30
         while not (port_file.exists() and port_file.read_text().strip()):
             if time.monotonic() > deadline or self.proc.poll() is not None:
@@ -43,13 +52,15 @@ class Chrome:
             pages = [t for t in json.loads(r.read()) if t["type"] == "page"]
         self._conn = connect(pages[0]["webSocketDebuggerUrl"], max_size=None)
         self.ws = self._conn.__enter__()
-        self._id = 0
 
     def call(self, method: str, **params: Any) -> dict[str, Any]:
         self._id += 1
         self.ws.send(json.dumps({"id": self._id, "method": method, "params": params}))
         while True:
             msg = json.loads(self.ws.recv(timeout=30))
+            if msg.get("method") in ("Runtime.consoleAPICalled", "Runtime.exceptionThrown",
+                                     "Log.entryAdded"):
+                self.console.append(msg)
             if msg.get("id") == self._id:
                 if "error" in msg:
                     raise RuntimeError(f"{method}: {msg['error']}")
@@ -64,7 +75,7 @@ class Chrome:
     def navigate(self, url: str) -> None:
         self.call("Page.enable")
         self.call("Page.navigate", url=url)
-        self.wait_for("document.readyState === 'complete' && !!window.radarState", 20)
+        self.wait_for("document.readyState === 'complete' && !!window.radarReady", 20)
 
     def wait_for(self, expr: str, timeout_s: float = 15.0) -> Any:
         deadline = time.monotonic() + timeout_s
@@ -80,12 +91,37 @@ class Chrome:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(base64.b64decode(data))
 
+    def errors(self) -> list[str]:
+        """Console errors, uncaught exceptions and failed loads seen so far (one line each);
+        call :meth:`watch_console` before navigating."""
+        out = []
+        for msg in self.console:
+            p = msg["params"]
+            if msg["method"] == "Runtime.exceptionThrown":
+                d = p["exceptionDetails"]
+                out.append(f"exception: {d.get('exception', {}).get('description') or d['text']}")
+            elif msg["method"] == "Runtime.consoleAPICalled" and p["type"] in ("error", "assert"):
+                out.append("console.error: " + " ".join(str(a.get("value", a.get("description")))
+                                                        for a in p["args"]))
+            elif msg["method"] == "Log.entryAdded" and p["entry"]["level"] == "error":
+                out.append(f"log: {p['entry']['text']} {p['entry'].get('url', '')}")
+        return out
+
+    def watch_console(self) -> None:
+        self.call("Runtime.enable")
+        self.call("Log.enable")
+
     def close(self) -> None:
         try:
-            self._conn.__exit__(None, None, None)
+            if self._conn is not None:
+                self._conn.__exit__(None, None, None)
         finally:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
+            self._stop_process()
+
+    def _stop_process(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()

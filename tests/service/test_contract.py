@@ -18,6 +18,13 @@ TOKEN = "contract-token"
 EXAMPLES = int(os.environ.get("RADAR_IO_CONTRACT_EXAMPLES", "40"))
 COUNT = {"with_token": 0, "without_token": 0}
 
+#: checks left out per operation, with the reason: the schema cannot say it
+EXCLUDED = {
+    # xr_m, yr_m, hr_m must have equal lengths: a cross-field rule OpenAPI cannot express,
+    # so schema-valid bodies of unequal lengths are rightly refused (422)
+    "/api/coordinates/runway-to-radar": ("positive_data_acceptance",),
+}
+
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
@@ -46,13 +53,14 @@ def run_contract(base: str, headers: dict[str, str], key: str) -> list[str]:
         op = result.ok()
         if op.path.startswith("/api/runway"):  # the storage helper's router: not declared yet
             continue
+        excluded = [getattr(schemathesis.checks, name) for name in EXCLUDED.get(op.path, ())]
 
         @given(case=op.as_strategy())
         @settings(max_examples=EXAMPLES, deadline=None, derandomize=True, database=None,
                   suppress_health_check=list(HealthCheck))
         def check(case) -> None:
             COUNT[key] += 1
-            case.call_and_validate(base_url=base, headers=headers)
+            case.call_and_validate(base_url=base, headers=headers, excluded_checks=excluded)
 
         try:
             check()

@@ -5,10 +5,12 @@ from __future__ import annotations
 import threading
 import time
 
-from radar_io.benchmarks.service_load import Pty, ServeProcess
+from contextlib import ExitStack
+
+from radar_io.benchmarks.service_load import Pty
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 
-from .cdp import Chrome
+from .liveserver import LiveServer, browser, ink_js, service_config  # noqa: F401
 from .test_live_pty import ARTIFACTS
 
 
@@ -39,15 +41,23 @@ class Writer(threading.Thread):
             time.sleep(0.01)
 
 
-def test_dashboard_track_lamps_stale_and_recovery(tmp_path):
-    pty = Pty()
-    writer = Writer(pty)
-    writer.start()
-    svc = ServeProcess(pty.path, tmp_path / "data")  # port 0: the port serve prints
-    port = svc.port
-    chrome = Chrome(tmp_path / "chrome")
-    try:
-        svc.wait_ready()
+def test_dashboard_track_lamps_stale_and_recovery(tmp_path, browser):  # noqa: F811
+    """Everything started here is stopped in ``finally``, also when a start fails; the
+    service binds port 0 and its restart reuses the port it got."""
+    chrome = browser
+    with ExitStack() as stack:
+        pty = Pty()
+        stack.callback(pty.close)
+        writer = Writer(pty)
+        writer.start()
+        stack.callback(writer.join, 5)
+        stack.callback(writer.stopped.set)
+        cfg = service_config(tmp_path / "svc", source=pty.path)
+        svc = LiveServer(cfg)
+        stack.callback(lambda: svc.stop())  # whichever server runs at the end
+        svc.start()
+        svc.wait_connected()
+        port = svc.port
         chrome.navigate(f"http://127.0.0.1:{port}/")
         # track and lamps from live data
         chrome.wait_for("radarState.points.length > 30 && radarState.connected")
@@ -58,10 +68,7 @@ def test_dashboard_track_lamps_stale_and_recovery(tmp_path):
         chrome.wait_for("(r => r > 150 && r < 260)(parseFloat(document.getElementById('c-rate')"
                         ".textContent))")  # the writer's ~200 frames/s
         # something was drawn on the plan view: the canvas is not blank
-        chrome.wait_for("""(() => { const c = document.getElementById('plan');
-            const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-            let n = 0; for (let i = 0; i < d.length; i += 4) if (d[i + 2] > 200 && d[i] < 100) n++;
-            return n > 60; })()""", 10)
+        chrome.wait_for(ink_js("document.getElementById('plan')") + " > 500", 10)
         chrome.screenshot(ARTIFACTS / "dashboard.png")
 
         # the source stops: STALE within about a second
@@ -83,20 +90,16 @@ def test_dashboard_track_lamps_stale_and_recovery(tmp_path):
         want = {m["msg_seq"] for m in track if m["rx_good"]}
         assert want and want <= plotted
 
-        # the server restarts: the page recovers on its own
+        # the server restarts on the same port: the page recovers on its own
         instance = chrome.eval("radarState.instance")
         svc.stop()
         chrome.wait_for("!document.getElementById('stale').hidden", 5)
         chrome.wait_for("!radarState.connected", 5)
-        svc = ServeProcess(pty.path, tmp_path / "data", port=port)
-        svc.wait_ready()
+        svc = LiveServer(cfg, port=port)
+        svc.start()
+        svc.wait_connected()
         chrome.wait_for(f"radarState.connected && radarState.instance !== '{instance}'", 20)
         n = chrome.eval("radarState.received")
         chrome.wait_for(f"radarState.received > {n + 20}", 10)
         chrome.wait_for("document.getElementById('stale').hidden", 5)
         chrome.screenshot(ARTIFACTS / "dashboard-recovered.png")
-    finally:
-        chrome.close()
-        writer.stopped.set()
-        svc.stop()
-        pty.close()

@@ -20,6 +20,8 @@ from radar_io.errors import UplinkError
 # ---- typed in from radar-interface.md §7 and the documented defaults: channel → (column, full scale)
 CHANNELS = [("x_m", 30000.0), ("y_m", 30000.0), ("dsr_m", 50.0), ("del_deg", 1.0),
             ("daz_deg", 1.0), ("dy_m", 500.0), ("dz_m", 150.0), ("h_m", 6000.0)]
+#: channel 8 is Z = -H (§7 "8 Z", §5 "Z = -H is the right-handed down axis"): its sign per channel
+SIGN = [1, 1, 1, 1, 1, 1, 1, -1]
 NAMES = ["x", "y", "dsr", "del", "daz", "dy", "dz", "z"]
 
 
@@ -59,7 +61,7 @@ def test_words_decode_back_within_one_lsb_and_saturate_without_wrapping():
         assert (ch == k).all()
         assert np.array_equal(pen == 1, ~valid)                     # PEN UP exactly on NG / GO = 0
         lsb = fs / 2048
-        v = cols[col][valid]
+        v = SIGN[k] * cols[col][valid]
         got = data12[valid] * lsb
         inside = (v >= -fs) & (v < fs - lsb / 2)
         assert np.max(np.abs(got[inside] - v[inside])) <= lsb / 2 + 1e-12
@@ -93,17 +95,36 @@ def test_a_nan_value_lifts_only_its_own_pen(tmp_path):
     s = ref_decode(DAEncoder().encode_batch(cols))
     assert [w[0] for w in s[2]] == [0, 0, 0, 0, 0, 0, 1, 0]
     assert s[2][6][2] == s[1][6][2]                                 # holds the last value
-    # pen_up_data = "zero" and Z = -H through gain = -1, both from the spec file
+    # pen_up_data = "zero", and channel 8 records H instead of Z = -H: both options of the spec file
     text = (ROOT / "firmware_specs" / "da_words.toml").read_text()
     f = tmp_path / "da.toml"
     f.write_text(text.replace('pen_up_data = "hold"', 'pen_up_data = "zero"')
-                 .replace("gain = 1.0", "gain = -1.0"))
+                 .replace('source = "z_m"', 'source = "h_m"'))
     spec = load_da_spec(f)
     s = ref_decode(DAEncoder(spec).encode_batch(cols))
     assert s[2][6] == (1, 6, 0)
-    assert s[0][7][2] == round(-cols["h_m"][0] / (6000 / 2048))
+    assert s[0][7][2] == round(cols["h_m"][0] / (6000 / 2048))
     words = decode_da_words(DAEncoder(spec).encode_batch(cols), spec)
     assert words.values[0, 7] == pytest.approx(cols["h_m"][0], abs=6000 / 2048 / 2)
+
+
+def test_channel_8_is_z_minus_h_by_default():
+    """An aircraft 1000 m above the antenna: channel 8 reads -1000 m (Z = -H), channels 1-2 X, Y."""
+    cols = {c: np.zeros(3) for c, _ in CHANNELS}
+    cols["h_m"][:] = [1000.0, -250.0, 0.0]
+    cols["x_m"][:] = [5000.0, 0.0, 0.0]
+    cols["rx_good"] = np.ones(3, np.uint8)
+    cols["go"] = np.ones(3, np.uint8)
+    s = ref_decode(DAEncoder().encode_batch(cols))
+    lsb = 6000 / 2048
+    assert [x[7][2] for x in s] == [round(-1000 / lsb), round(250 / lsb), 0]
+    assert s[0][0][2] == round(5000 / (30000 / 2048))
+    assert decode_da_words(DAEncoder().encode_batch(cols)).values[0, 7] == pytest.approx(-1000, abs=lsb / 2)
+    cols["z_m"] = np.array([7.0, 7.0, 7.0])     # a batch that carries Z itself is used as it is
+    assert ref_decode(DAEncoder().encode_batch(cols))[0][7][2] == round(7 / lsb)
+    del cols["z_m"], cols["h_m"]
+    with pytest.raises(UplinkError, match=r"channel 8 \(z\) needs column 'z_m'"):
+        DAEncoder().encode_batch(cols)
 
 
 def test_library_decoder_and_sinks(tmp_path):
@@ -143,7 +164,7 @@ def test_missing_dy_needs_a_path_and_real_flight():
     assert (~valid).sum() > 0 and enc.pen_up_samples == (~valid).sum()
     for k, (col, fs) in enumerate(CHANNELS):
         got = np.array([s[k][2] for s in samples])[valid] * fs / 2048
-        assert np.max(np.abs(got - batch[col][valid])) <= fs / 2048 / 2 + 1e-9
+        assert np.max(np.abs(got - SIGN[k] * batch[col][valid])) <= fs / 2048 / 2 + 1e-9
 
 
 def test_spec_errors(tmp_path):
@@ -153,7 +174,10 @@ def test_spec_errors(tmp_path):
                           ("number = 8", "number = 9", "number must be 1 .. 8"),
                           ("number = 8", "number = 7", "numbers must be unique"),
                           ('pen_up_data = "hold"', 'pen_up_data = "last"', "pen_up_data"),
-                          ("full_scale = 6000.0", 'full_scale = "6000 *"', "cannot parse")]:
+                          ("full_scale = 6000.0", 'full_scale = "6000 *"', "cannot parse"),
+                          ('gain = 1.0', 'gian = 1.0', "channel 'z': unknown key 'gian'"),
+                          ('pen_up_data = "hold"', 'pen_up_data = "hold"\nbyteorder = 1',
+                           r"\[word\]: unknown key 'byteorder'")]:
         f.write_text(text.replace(old, new))
         with pytest.raises(SpecError, match=msg):
             load_da_spec(f)

@@ -155,7 +155,8 @@ def test_decoder_hunts_counts_and_survives_damage():
     one = TelemetryDecoder()
     whole = one.feed(data)
     one.flush()
-    assert one.stats == {"frames": 398, "crc_errors": 2, "bytes_discarded": 26 + 7, "seq_gaps": 2}
+    assert one.stats == {"frames": 398, "crc_errors": 2, "implausible": 0, "bytes_discarded": 26 + 7,
+                         "seq_gaps": 2}
     chunked = TelemetryDecoder()
     parts, pos = [], 0
     while pos < len(data):

@@ -245,3 +245,28 @@ def test_fit_concurrent_lines_beats_independent_fits_on_noisy_edges():
         err_conc.append(float(g.solve_pose(*conc, F, D).height_m) / h - 1)
     assert np.sqrt(np.mean(np.square(err_conc))) < 0.5 * np.sqrt(np.mean(np.square(err_free)))
     assert abs(np.mean(err_conc)) < 0.005
+
+
+def test_projection_matches_opencv_project_points():
+    """Eq. (1)-(2) against cv2.projectPoints: earth → camera built from three cv2.Rodrigues
+    frame rotations (yaw about z, pitch about y, bank about x), the spec's camera axes
+    (X forward, Y right, Z down) permuted to OpenCV's (right, down, forward); pixel
+    u = x' + c_x, v = -y' + c_y."""
+    import cv2
+
+    rng = np.random.default_rng(8)
+    rod = lambda v: cv2.Rodrigues(np.array(v, dtype=float))[0]  # noqa: E731
+    to_cv = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    cx, cy = 319.5, 239.5
+    k = np.array([[F, 0.0, cx], [0.0, F, cy], [0.0, 0.0, 1.0]])
+    for _ in range(20):
+        bank, pitch, yaw = np.radians(rng.uniform([-20, -10, -10], [20, 5, 10]))
+        cam = np.array([rng.uniform(-3000, -200), rng.uniform(-40, 40), -rng.uniform(5, 500)])
+        pts = np.column_stack([rng.uniform(0, 3000, 30), rng.uniform(-D, D, 30), np.zeros(30)])
+        r_cv = to_cv @ rod([-bank, 0, 0]) @ rod([0, -pitch, 0]) @ rod([0, 0, -yaw])
+        uv, _ = cv2.projectPoints(pts, cv2.Rodrigues(r_cv)[0], -r_cv @ cam, k, None)
+        x, y, depth = g.project_points(pts, cam, bank, pitch, yaw, F)
+        front = depth > 0
+        assert front.sum() >= 10
+        np.testing.assert_allclose(x[front] + cx, uv[front, 0, 0], atol=1e-8)
+        np.testing.assert_allclose(-y[front] + cy, uv[front, 0, 1], atol=1e-8)

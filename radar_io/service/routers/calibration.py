@@ -8,7 +8,7 @@ from typing import Any, Literal
 from fastapi import APIRouter, Body, Depends
 from pydantic import BaseModel, ConfigDict, Field
 
-from radar_io.decoding.biases import FORMAT, Calibration, save_calibration, utc_now_iso
+from radar_io.decoding.biases import BIAS_LIMITS, FORMAT, Calibration, save_calibration, utc_now_iso
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
 from radar_io.service.state import ID_PATTERN, ServiceState, check_id
@@ -34,13 +34,18 @@ class Biases(BaseModel):
     """ΔSR, ΔEL, ΔAZ added after servo-lag compensation."""
 
     model_config = ConfigDict(extra="forbid")
-    dsr_m: float = Field(0.0, allow_inf_nan=False, description="slant-range bias, m")
-    del_deg: float = Field(0.0, allow_inf_nan=False, description="elevation bias, deg")
-    daz_deg: float = Field(0.0, allow_inf_nan=False, description="azimuth bias, deg")
+    dsr_m: float = Field(0.0, ge=-BIAS_LIMITS["dsr_m"], le=BIAS_LIMITS["dsr_m"],
+                         description="slant-range bias, m")
+    del_deg: float = Field(0.0, ge=-BIAS_LIMITS["del_deg"], le=BIAS_LIMITS["del_deg"],
+                           description="elevation bias, deg")
+    daz_deg: float = Field(0.0, ge=-BIAS_LIMITS["daz_deg"], le=BIAS_LIMITS["daz_deg"],
+                           description="azimuth bias, deg")
 
 
 class CalibrationDoc(BaseModel):
     """A calibration set (the document GET returns and POST /api/calibration/bias proposes)."""
+
+    model_config = ConfigDict(extra="forbid")
 
     format: Literal["radar_io-calibration/1"] = FORMAT
     id: str = Field("unnamed", pattern=ID_PATTERN, description="a plain name")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Depends, Path, Query
+from fastapi import APIRouter, Depends, HTTPException, Path, Query
 from fastapi.responses import FileResponse
 
-from radar_io.errors import ConflictError
+from radar_io.errors import ConflictError, StorageError
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
 from radar_io.service.state import ID_PATTERN, ServiceState
@@ -36,9 +36,19 @@ def recordings(state: ServiceState = Depends(get_state)) -> list[dict[str, Any]]
                 "schema": {"type": "string", "format": "binary"}}},
                 "description": "the .rdrlog file"}, **responses(404, 422)})
 def download(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
-             state: ServiceState = Depends(get_state)) -> OctetStream:
-    """The .rdrlog file itself."""
+             state: ServiceState = Depends(get_state)) -> Any:
+    """The .rdrlog file itself; one still being written comes as a snapshot up to its last
+    whole chunk at request time (Content-Length = body, a prefix of the final file)."""
     p = state.recording_path(rec_id)
+    size = state.recorder.committed_bytes(rec_id)  # storage: snapshot of an open recording
+    if size is not None:
+        from fastapi.responses import StreamingResponse
+
+        from radar_io.recording.rdrlog import iter_prefix
+
+        return StreamingResponse(iter_prefix(p, size), media_type="application/octet-stream",
+                                 headers={"Content-Length": str(size), "Content-Disposition":
+                                          f'attachment; filename="{p.name}"'})
     return OctetStream(p, media_type="application/octet-stream", filename=p.name)
 
 
@@ -65,7 +75,10 @@ def rec_start(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Start a manual recording (507 when the disk has no room)."""
     if state.acq.mode != "live":
         raise ConflictError("cannot record while replaying")
-    return {"recording": state.recorder.start("manual")}
+    try:
+        return {"recording": state.recorder.start("manual")}
+    except StorageError as exc:  # storage: 507 no room (ENOSPC, EDQUOT, EFBIG), else 503
+        raise HTTPException(state.recorder.http_status(exc), str(exc)) from exc
 
 
 @router.post("/api/recordings/stop", tags=["control"], dependencies=CONTROL,

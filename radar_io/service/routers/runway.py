@@ -1,22 +1,76 @@
-"""Runway vision over HTTP (runway-vision.md): upload an image or a frame sequence, or
-send operator-picked points, and get the pose; images come back with the detected lines
-drawn on them. Analysis only (no state changes), so no token is needed.
+"""Runway vision over HTTP (runway-vision.md): upload an image or a video, or send
+operator-picked points, and get the pose; images come back with the detected lines drawn
+on them.
+
+Uploads need the control token (they cost minutes of CPU). The body is streamed to a
+temporary file and refused with 413 as soon as it passes the limit (at once when the
+declared Content-Length does). An image is processed on a worker thread and answered
+directly; a video (``Content-Type: video/*``) becomes a job (202, see
+:mod:`radar_io.service.runway_jobs`): ``GET /api/runway/jobs/ID`` for its state and,
+when done, its result; ``DELETE`` cancels. OpenCV never runs on the event loop.
 """
 
 from __future__ import annotations
 
 import base64
 import os
-import tempfile
+import threading
+from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
-MAX_BODY = 512 << 20   #: bytes accepted for one upload
-MAX_FRAMES = 20000     #: frames processed from one uploaded sequence
+from radar_io.service.routers.deps import require_token
+from radar_io.service.runway_jobs import MAX_FRAMES, RunwayJobs
+
+MAX_BODY = 512 << 20   #: bytes accepted for one upload (config max_upload_mb)
+
+__all__ = ["MAX_BODY", "MAX_FRAMES", "router"]
+
 
 router = APIRouter(tags=["runway vision"])
+_jobs_lock = threading.Lock()
+
+
+def jobs_of(app: Any) -> RunwayJobs:
+    """The service's runway job table, created on first use (config: runway_queue); closed
+    by the service's stop()."""
+    state = app.state.service
+    with _jobs_lock:
+        if getattr(state, "runway_jobs", None) is None:
+            state.runway_jobs = RunwayJobs(max_queued=int(getattr(state.cfg, "runway_queue", 2)))
+        return state.runway_jobs
+
+
+def _max_body(request: Request) -> int:
+    mb = getattr(request.app.state.service.cfg, "max_upload_mb", None)
+    return int(mb) << 20 if mb else MAX_BODY
+
+
+async def _spool(request: Request, path: Path, limit: int) -> int:
+    """Stream the request body into ``path``; 413 as soon as it exceeds ``limit`` bytes."""
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise HTTPException(413, f"upload of {int(declared)} bytes is larger than the "
+                            f"{limit} bytes allowed")
+    size = 0
+    try:
+        with open(path, "wb") as f:
+            async for piece in request.stream():
+                size += len(piece)
+                if size > limit:
+                    raise HTTPException(413, f"upload larger than the {limit} bytes allowed")
+                f.write(piece)  # page cache: microseconds per piece
+    except BaseException:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+        raise
+    return size
 
 
 class PickedPoints(BaseModel):
@@ -67,53 +121,19 @@ def _lines(res: Any) -> dict[str, Any]:
              ("right_edge", res.right_edge_px))}
 
 
-@router.post("/api/runway")
-async def runway(request: Request, focal_px: float = Query(gt=0, description="focal length, px"),
-                 half_width_m: float = Query(gt=0, description="runway half-width d, m"),
-                 cx: float | None = Query(None, description="principal point x (default centre)"),
-                 cy: float | None = Query(None, description="principal point y (default centre)"),
-                 overlay: bool = True) -> dict[str, Any]:
-    """Pose from one image (body: PNG/JPEG/... bytes) or a frame sequence (body: a video,
-    ``Content-Type: video/*``): bank, pitch, yaw, height above and lateral offset from the
-    runway, quality, and the detected lines (``A·x + B·y + C = 0``, pixels)."""
+def _image_pose(path: Path, focal_px: float, half_width_m: float,
+                pp: tuple[float, float] | None, overlay: bool) -> dict[str, Any]:
+    """Decode the uploaded image and find the runway (runs on a worker thread)."""
     import cv2
     import numpy as np
 
-    from radar_io.vision.chain import RunwayTracker, find_runway
     from radar_io.errors import VisionError
+    from radar_io.vision.chain import find_runway
 
-    body = await request.body()
-    if not body:
-        raise HTTPException(422, "empty body: send the image (or video) bytes")
-    if len(body) > MAX_BODY:
-        raise HTTPException(413, f"upload larger than {MAX_BODY >> 20} MB")
-    pp = (cx, cy) if cx is not None and cy is not None else None
-    ctype = request.headers.get("content-type", "")
+    img = cv2.imdecode(np.fromfile(str(path), np.uint8), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise HTTPException(422, "cannot decode the image (PNG, JPEG, BMP, TIFF … expected)")
     try:
-        if ctype.startswith("video/"):
-            with tempfile.NamedTemporaryFile(suffix=".video", delete=False) as f:
-                f.write(body)
-            try:
-                cap = cv2.VideoCapture(f.name)
-                if not cap.isOpened():
-                    raise HTTPException(422, "cannot decode the video")
-                tracker = RunwayTracker(focal_px, half_width_m, pp)
-                frames: list[dict[str, Any]] = []
-                while len(frames) < MAX_FRAMES:
-                    ok, img = cap.read()
-                    if not ok:
-                        break
-                    gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-                    frames.append({"frame": len(frames), **tracker.process(gray).to_dict()})
-                cap.release()
-            finally:
-                os.unlink(f.name)
-            if not frames:
-                raise HTTPException(422, "the video holds no frames")
-            return {"frames": frames, "found": sum(1 for r in frames if r["found"])}
-        img = cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_GRAYSCALE)
-        if img is None:
-            raise HTTPException(422, "cannot decode the image (PNG, JPEG, BMP, TIFF … expected)")
         res = find_runway(img, focal_px, half_width_m, pp)
     except VisionError as exc:
         raise HTTPException(422, str(exc)) from exc
@@ -122,6 +142,75 @@ async def runway(request: Request, focal_px: float = Query(gt=0, description="fo
     if overlay:
         out["overlay_png_base64"] = _overlay_png(img, res)
     return out
+
+
+@router.post("/api/runway", dependencies=[Depends(require_token)], status_code=200,
+             responses={202: {"description": "video accepted as a job"},
+                        413: {"description": "upload too large"},
+                        429: {"description": "job queue full"}})
+async def runway(request: Request, focal_px: float = Query(gt=0, description="focal length, px"),
+                 half_width_m: float = Query(gt=0, description="runway half-width d, m"),
+                 cx: float | None = Query(None, description="principal point x (default centre)"),
+                 cy: float | None = Query(None, description="principal point y (default centre)"),
+                 overlay: bool = True) -> Any:
+    """Pose from one image (body: PNG/JPEG/... bytes): bank, pitch, yaw, height above and
+    lateral offset from the runway, quality, and the detected lines (``A·x + B·y + C = 0``,
+    pixels). A video (``Content-Type: video/*``) is queued as a job: 202
+    ``{"job", "status_url"}``; 429 when the queue is full."""
+    from radar_io.errors import VisionError
+    from radar_io.service.runway_jobs import QueueFull
+    from radar_io.vision.chain import RunwayTracker
+
+    pp = (cx, cy) if cx is not None and cy is not None else None
+    try:
+        RunwayTracker(focal_px, half_width_m, pp)  # camera parameters checked before the upload
+    except VisionError as exc:
+        raise HTTPException(422, str(exc)) from exc
+    jobs = jobs_of(request.app)
+    video = request.headers.get("content-type", "").startswith("video/")
+    if video and jobs.stats()["queued"] >= jobs.max_queued:
+        raise HTTPException(429, "runway job queue full: try again later")
+    path = jobs.new_spool_path()
+    size = await _spool(request, path, _max_body(request))
+    if size == 0:
+        os.unlink(path)
+        raise HTTPException(422, "empty body: send the image (or video) bytes")
+    if not video:
+        try:
+            return await run_in_threadpool(_image_pose, path, focal_px, half_width_m, pp, overlay)
+        finally:
+            os.unlink(path)
+    try:
+        job = jobs.submit(path, focal_px, half_width_m, pp)
+    except QueueFull as exc:
+        os.unlink(path)
+        raise HTTPException(429, str(exc)) from exc
+    return JSONResponse({"job": job.id, "status_url": f"/api/runway/jobs/{job.id}"},
+                        status_code=202)
+
+
+@router.get("/api/runway/jobs/{job_id}")
+def runway_job(request: Request, job_id: str) -> dict[str, Any]:
+    """A video job: state (queued, running, done, failed, cancelled), frames_done,
+    frames_total (null when the container does not say), result (when done: frames, found),
+    error (when failed)."""
+    from radar_io.errors import NotFoundError
+
+    try:
+        return jobs_of(request.app).get(job_id).as_dict()
+    except NotFoundError as exc:
+        raise HTTPException(404, str(exc)) from exc
+
+
+@router.delete("/api/runway/jobs/{job_id}", dependencies=[Depends(require_token)])
+def runway_job_cancel(request: Request, job_id: str) -> dict[str, Any]:
+    """Cancel a video job (queued: at once; running: at its next frame)."""
+    from radar_io.errors import NotFoundError
+
+    try:
+        return jobs_of(request.app).cancel(job_id).as_dict()
+    except NotFoundError as exc:
+        raise HTTPException(404, str(exc)) from exc
 
 
 @router.post("/api/runway/manual")
