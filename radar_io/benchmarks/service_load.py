@@ -85,8 +85,8 @@ class ServeProcess:
             raise RuntimeError(f"serve did not start: {err.strip()}")
         self.base = f"http://127.0.0.1:{self.port}"
 
-    def get(self, path: str) -> Any:
-        with urllib.request.urlopen(self.base + path, timeout=5) as r:
+    def get(self, path: str, timeout_s: float = 5.0) -> Any:
+        with urllib.request.urlopen(self.base + path, timeout=timeout_s) as r:
             return json.loads(r.read())
 
     def wait_ready(self, timeout_s: float = 30.0, connected: bool = True) -> dict[str, Any]:
@@ -243,3 +243,173 @@ def bench_service(seconds: float = 5.0, clients: int = 20, rate_hz: float = 1000
         "serve_ws_dropped_for_stalled_client": status["ws_dropped"],
         "serve_frames": status["frames"] - st["frames"],
     }
+
+
+def rss_mb(pid: int) -> float:
+    """Resident set size of a process (MiB), from /proc."""
+    with open(f"/proc/{pid}/status", encoding="ascii") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def _fanout_worker(url: str, n: int, batch: bool, connected: Any, stop: Any) -> list[bytes]:
+    """One client process: ``n`` websocket clients until ``stop`` is set; per client the
+    ``(first, last)`` msg_seq of every frame received (an ``array('q')`` in bytes). Nothing
+    is JSON-parsed: a frame's messages are consecutive, so only its first and last
+    msg_seq are read out of the text (and their count checked)."""
+    import re
+    from array import array
+
+    import websockets
+
+    key = b'"msg_seq":'
+    num = re.compile(rb"\d+")
+    done = asyncio.Event()
+
+    async def watch() -> None:
+        while not await asyncio.to_thread(stop.wait, 0.5):
+            pass
+        done.set()
+
+    def seq_at(msg: bytes, i: int) -> int:
+        m = num.match(msg, i + len(key))
+        return int(m.group()) if m else -1
+
+    async def client(spans: "array[int]") -> None:
+        async with websockets.connect(url, max_size=None, open_timeout=120) as ws:
+            connected.put(1)
+            while not done.is_set():
+                try:
+                    msg = await asyncio.wait_for(ws.recv(decode=False), 0.5)
+                except asyncio.TimeoutError:
+                    continue
+                first, last = seq_at(msg, msg.find(key)), seq_at(msg, msg.rfind(key))
+                if batch and msg.count(key) != last - first + 1:
+                    first = last = -1  # not consecutive: counted as lost
+                spans.extend((first, last))
+
+    async def main() -> list[bytes]:
+        out = [array("q") for _ in range(n)]
+        w = asyncio.create_task(watch())
+        await asyncio.gather(*(client(a) for a in out), return_exceptions=True)
+        await w
+        return [a.tobytes() for a in out]
+
+    return asyncio.run(main())
+
+
+_POLL = """
+import json, sys, time, urllib.request
+url, until, every = sys.argv[1], float(sys.argv[2]), float(sys.argv[3])
+lat = []
+while time.time() < until:
+    t0 = time.perf_counter()
+    try:
+        urllib.request.urlopen(url, timeout=30).read()
+        lat.append((time.perf_counter() - t0) * 1e3)
+    except OSError:
+        lat.append(float("inf"))
+    time.sleep(every)
+print(json.dumps(lat))
+"""
+
+
+def bench_fanout(clients: int = 200, rate_hz: float = 1000.0, seconds: float = 10.0,
+                 batch: bool = True, status_every_s: float = 0.05, settle_s: float = 5.0,
+                 processes: int = 2, interval_s: float | None = None) -> dict[str, Any]:
+    """``clients`` websocket clients on one ``serve`` (simulator at ``rate_hz``) for
+    ``seconds``: /api/status latency (p50/p99/max, ms) polled by a separate process
+    meanwhile, messages per client among those published in the window, messages lost,
+    the server's ``ws_dropped``, and the server's RSS (MiB): idle with data flowing
+    before, peak during, and ``settle_s`` after the clients left. The clients run in
+    ``processes`` child processes, so the poller and the clients do not share a GIL."""
+    import multiprocessing as mp
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        cfg = Path(d) / "serve.toml"
+        cfg.write_text(f'auto_record = "manual"\nws_max_clients = {clients + 10}\n' +
+                       (f"ws_batch_interval_s = {interval_s}\n" if interval_s is not None else ""))
+        svc = ServeProcess(f"sim://?rate_hz={rate_hz:g}&ng_per_min=0", Path(d) / "data",
+                           extra=("--config", str(cfg)))
+        pid = svc.proc.pid
+        ctx = mp.get_context("spawn")
+        try:
+            svc.wait_ready()
+            time.sleep(2.0)
+            rss_before = rss_mb(pid)
+            url = f"ws://127.0.0.1:{svc.port}/ws/live" + ("?batch=1" if batch else "")
+            manager = ctx.Manager()
+            connected, stop = manager.Queue(), manager.Event()
+            share = [clients // processes + (k < clients % processes) for k in range(processes)]
+            t_connect = time.time()
+            with ctx.Pool(processes) as pool:
+                jobs = [pool.apply_async(_fanout_worker, (url, n, batch, connected, stop))
+                        for n in share if n]
+                for _ in range(clients):
+                    connected.get(timeout=60)
+                t_ready = time.time()
+                seq0 = svc.get("/api/track?limit=1", 60)["last_msg_seq"]
+                poll = subprocess.Popen([sys.executable, "-c", _POLL, svc.base + "/api/status",
+                                         str(t_ready + seconds), str(status_every_s)],
+                                        stdout=subprocess.PIPE, text=True)
+                rss_during = []
+                while time.time() < t_ready + seconds:
+                    rss_during.append(rss_mb(pid))
+                    time.sleep(0.2)
+                seq1 = svc.get("/api/track?limit=1", 60)["last_msg_seq"]
+                lat = np.array(json.loads(poll.communicate(timeout=120)[0]))
+                time.sleep(2.0)  # the window's last messages are still on their way
+                stop.set()
+                results = [j.get(timeout=60.0 + seconds + 60.0) for j in jobs]
+            st = svc.get("/api/status", 60)
+            time.sleep(settle_s)
+            rss_after = rss_mb(pid)
+        finally:
+            svc.stop()
+            if "manager" in locals():
+                manager.shutdown()
+    got = []
+    for per_process in results:
+        for raw in per_process:
+            span = np.frombuffer(raw, dtype=np.int64).reshape(-1, 2)
+            lo = np.maximum(span[:, 0], seq0 + 1)
+            hi = np.minimum(span[:, 1], seq1)
+            got.append(int(np.clip(hi - lo + 1, 0, None)[span[:, 0] >= 0].sum()))
+    per_client = np.array(got)
+    published = seq1 - seq0
+    return {
+        "fanout_clients": clients, "fanout_rate_hz": rate_hz, "fanout_seconds": seconds,
+        "fanout_batch": batch, "ws_batch_interval_s": interval_s, "connect_s": round(t_ready - t_connect, 1),
+        "status_requests": int(lat.size),
+        "status_p50_ms": float(np.percentile(lat, 50)),
+        "status_p99_ms": float(np.percentile(lat, 99)),
+        "status_max_ms": float(lat.max()),
+        "messages_published": int(published),
+        "messages_per_client_median": float(np.median(per_client)),
+        "messages_per_client_min": int(per_client.min()),
+        "messages_per_client_max": int(per_client.max()),
+        "lost_per_client_median": float(published - np.median(per_client)),
+        "lost_total": int(published * len(per_client) - per_client.sum()),
+        "server_ws_dropped": int(st["ws_dropped"]),
+        "history_bytes": int(st.get("history_bytes", 0)),
+        "history_messages": int(st.get("history_messages", 0)),
+        "rss_before_mb": round(rss_before, 1), "rss_during_max_mb": round(max(rss_during), 1),
+        "rss_after_mb": round(rss_after, 1),
+    }
+
+
+if __name__ == "__main__":
+    import argparse
+
+    ap = argparse.ArgumentParser(description="websocket fan-out load on radar-io serve")
+    ap.add_argument("--clients", type=int, default=200)
+    ap.add_argument("--rate-hz", type=float, default=1000.0)
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--no-batch", action="store_true", help="one message per websocket frame")
+    ap.add_argument("--processes", type=int, default=2, help="client processes")
+    ap.add_argument("--interval-s", type=float, help="the server's ws_batch_interval_s")
+    a = ap.parse_args()
+    print(json.dumps(bench_fanout(a.clients, a.rate_hz, a.seconds, not a.no_batch,
+                                  processes=a.processes, interval_s=a.interval_s), indent=2))

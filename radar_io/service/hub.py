@@ -7,7 +7,8 @@ bounded in messages: beyond it the oldest blocks are skipped (counted in ``dropp
 the recording is never affected: it was written by the reader thread before decoding).
 
 Per client: ``batch`` clients receive one JSON array per block (the array text is built
-once per block, shared by all of them); the others one message per websocket frame;
+once per block, shared by all of them; when several blocks wait because the loop is
+busy, they go as one frame, so a loaded server sends fewer, larger frames); the others one message per websocket frame;
 ``max_hz`` clients get the newest message at most that often. A client that resumes
 with ``from=N`` first receives every message after N still in the history, then the
 live stream, without duplicates.
@@ -24,6 +25,10 @@ from typing import Any
 from starlette.websockets import WebSocket
 
 from radar_io.service.history import History
+
+
+#: a one-message-per-frame client yields to the loop after this many sends
+YIELD_EVERY = 16
 
 
 class Block:
@@ -88,11 +93,17 @@ class Client:
             return
         if self.batch:
             await self._send_text("[" + ",".join(t for _, t in items) + "]")
-        else:
-            for _, text in items:
-                await self._send_text(text)
-        self.last_sent = items[-1][0]
-        self.sent += len(items)
+            self.last_sent = items[-1][0]
+            self.sent += len(items)
+            return
+        for k, (seq, text) in enumerate(items):
+            await self._send_text(text)
+            self.last_sent = seq
+            self.sent += 1
+            if k % YIELD_EVERY == YIELD_EVERY - 1:
+                await asyncio.sleep(0)  # a send that does not block never yields: take turns
+                if self.queued > self.queue_size:  # fallen behind meanwhile: skip ahead
+                    return
 
     async def _send_block(self, b: Block) -> None:
         if b.first < 0:  # an event, outside the numbered history: one text frame each
@@ -108,6 +119,19 @@ class Client:
         self.last_sent = b.last
         self.sent += len(b.items)
 
+    async def _send_blocks(self, blocks: list[Block]) -> None:
+        """Batch client, several blocks waiting (the loop is busy): one frame for all of them,
+        joined from the shared array texts, so the sends per second fall as load rises."""
+        blocks = [b for b in blocks if b.last > self.last_sent]
+        if not blocks:
+            return
+        if blocks[0].first <= self.last_sent:  # overlaps the backfill: per message
+            await self._send_items([it for b in blocks for it in b.items])
+            return
+        await self._send_text("[" + ",".join(b.array[1:-1] for b in blocks) + "]")
+        self.last_sent = blocks[-1].last
+        self.sent += sum(len(b.items) for b in blocks)
+
     async def run(self, history: History, resume_after: int | None) -> None:
         if resume_after is not None:
             after = resume_after
@@ -121,6 +145,12 @@ class Client:
             await self.wake.wait()
             self.wake.clear()
             q = self.queue
+            if self.batch and len(q) > 1:
+                blocks = list(q)
+                q.clear()
+                self.queued = 0
+                await self._send_blocks(blocks)
+                continue
             while q:
                 b = q.popleft()
                 self.queued -= len(b.items)
@@ -141,6 +171,8 @@ class Hub:
         self.clients: set[Client] = set()
         self.loop: asyncio.AbstractEventLoop | None = None
         self.refused = 0
+        self.undispatched = 0  #: messages dropped before dispatch (loop overloaded)
+        self.max_pending = max(10 * queue_size, 20000)
         self._dropped_closed = 0
         self._pending: list[tuple[int, str]] = []
         self._lock = threading.Lock()
@@ -157,6 +189,10 @@ class Hub:
             return
         with self._lock:
             self._pending.extend(items)
+            over = len(self._pending) - self.max_pending
+            if over > 0:  # the loop is not dispatching (overloaded): keep the newest only
+                del self._pending[:over]
+                self.undispatched += over
             if self._scheduled:
                 return
             self._scheduled = True
@@ -210,7 +246,8 @@ class Hub:
 
     @property
     def dropped(self) -> int:
-        return self._dropped_closed + sum(c.dropped for c in self.clients)
+        return self._dropped_closed + sum(c.dropped for c in self.clients) + \
+            self.undispatched * len(self.clients)
 
     def stats(self) -> dict[str, Any]:
         return {"ws_clients": len(self.clients), "ws_dropped": self.dropped,

@@ -27,12 +27,13 @@ from radar_io.sources.replay import ReplaySource
 from radar_io.wirespec.frame import load_spec
 
 #: a recording or calibration id: a plain file name
-ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
+ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$"
+ID_RE = re.compile(ID_PATTERN)
 
 
 def check_id(value: str, what: str) -> str:
     """``value`` if it is a plain name; ValidationError otherwise."""
-    if not ID_RE.match(value) or ".." in value:
+    if not ID_RE.match(value):
         raise ValidationError(f"{what} {value!r} must be a plain name (letters, digits, _ . -)")
     return value
 
@@ -85,6 +86,9 @@ class ServiceState:
             self.acq.processors.append(DeviationProcessor(self.path))
         if cfg.tlm_out and self.path is None:
             raise ConfigError("tlm_out: TLM1 carries the path deviation (dy_m, dz_m): "
+                              "give a reference path (--path)")
+        if cfg.da_out and self.path is None:
+            raise ConfigError("da_out: D/A channels 6-7 carry the path deviation (dy_m, dz_m): "
                               "give a reference path (--path)")
         if cfg.tlm_out:
             from radar_io.encoding.tlm1 import TelemetryEncoder

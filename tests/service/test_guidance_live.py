@@ -12,6 +12,7 @@ import struct
 import threading
 import time
 import urllib.request
+import uuid
 
 import can
 import numpy as np
@@ -21,7 +22,6 @@ import uvicorn
 from radar_io.simulation.aircraft import AircraftSimulator
 from radar_io.service.app import create_app
 from radar_io.service.config import ServiceConfig
-from radar_io.benchmarks.service_load import free_port
 from radar_io.simulation.radar import FlightScript, SimConfig
 from radar_io.wirespec.frame import spec_dir
 
@@ -31,46 +31,50 @@ from .test_live_pty import ARTIFACTS, wait_for
 
 @pytest.fixture()
 def live(tmp_path):
-    port = free_port()
-    channel = f"air-{port}"
-    cfg = ServiceConfig(source="sim://?go_delay_s=0.2&ng_per_min=0", port=port,
+    channel = f"air-{uuid.uuid4().hex[:12]}"
+    cfg = ServiceConfig(source="sim://?go_delay_s=0.2&ng_per_min=0", port=0,
                         data_dir=str(tmp_path / "data"),
                         path=str(spec_dir() / "paths" / "demo_track_radar.toml"),
                         tlm_out=str(tmp_path / "uplink.tlm"), tlm_cycle_s=0.02,
                         da_out=str(tmp_path / "da.bin"), can=f"virtual:{channel}")
     app = create_app(cfg)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning",
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
                                            ws_per_message_deflate=False))
     th = threading.Thread(target=server.run, daemon=True)
     th.start()
-    wait_for(lambda: server.started, what="uvicorn")
     stop = threading.Event()
+    ac: threading.Thread | None = None
+    try:  # the server is stopped even when its start fails
+        wait_for(lambda: server.started, what="uvicorn")
+        port = server.servers[0].sockets[0].getsockname()[1]  # port 0: the one the kernel gave
 
-    def aircraft() -> None:  # the aircraft's recorder traffic on the bus, in real time
-        bus = can.Bus(interface="virtual", channel=channel)
-        sim = AircraftSimulator(FlightScript(), SimConfig(sync_every_s=2.0), duration_s=60.0)
-        t0, t = time.monotonic(), 0.0
-        while not stop.is_set() and t < 59.0:
-            now = time.monotonic() - t0
-            if now > t:
-                sim.send(bus, t, now)
-                t = now
-            time.sleep(0.05)
-        bus.shutdown()
+        def aircraft() -> None:  # the aircraft's recorder traffic on the bus, in real time
+            bus = can.Bus(interface="virtual", channel=channel)
+            sim = AircraftSimulator(FlightScript(), SimConfig(sync_every_s=2.0), duration_s=60.0)
+            t0, t = time.monotonic(), 0.0
+            while not stop.is_set() and t < 59.0:
+                now = time.monotonic() - t0
+                if now > t:
+                    sim.send(bus, t, now)
+                    t = now
+                time.sleep(0.05)
+            bus.shutdown()
 
-    ac = threading.Thread(target=aircraft, daemon=True)
-    ac.start()
-    base = f"http://127.0.0.1:{port}"
+        ac = threading.Thread(target=aircraft, daemon=True)
+        ac.start()
+        base = f"http://127.0.0.1:{port}"
 
-    def get(path: str):
-        with urllib.request.urlopen(base + path, timeout=5) as r:
-            return json.loads(r.read())
+        def get(path: str):
+            with urllib.request.urlopen(base + path, timeout=5) as r:
+                return json.loads(r.read())
 
-    yield base, get, tmp_path
-    stop.set()
-    server.should_exit = True
-    th.join(10)
-    ac.join(5)
+        yield base, get, tmp_path
+    finally:
+        stop.set()
+        server.should_exit = True
+        th.join(10)
+        if ac is not None:
+            ac.join(5)
 
 
 def test_deviation_uplink_and_air_data_live(live):

@@ -53,8 +53,9 @@ def test_a_good_config_file_and_overrides(tmp_path):
         load_config(str(cfg), {"port": -1})
 
 
-def test_tlm1_without_a_path_is_refused_at_start(tmp_path):
-    r = serve(tmp_path, "--tlm-out", "udp://127.0.0.1:9")
+@pytest.mark.parametrize("option,field", [("--tlm-out", "tlm_out"), ("--da-out", "da_out")])
+def test_uplinks_without_a_path_are_refused_at_start(tmp_path, option, field):
+    r = serve(tmp_path, option, "udp://127.0.0.1:9")
     assert r.returncode == 2
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "tlm_out" in lines[0] and "--path" in lines[0], r.stderr
+    assert len(lines) == 1 and field in lines[0] and "--path" in lines[0], r.stderr

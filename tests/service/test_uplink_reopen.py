@@ -71,3 +71,54 @@ def test_tlm1_socket_uplink_absent_at_start_then_gone_for_3_s_reconnects(tmp_pat
         for c in conns:
             c.close()
         far.close()
+
+
+def read_pty(pty, n_bytes: int, timeout_s: float = 15.0) -> bytes:
+    """At least ``n_bytes`` from the master side of a pty."""
+    import os
+    import select
+
+    got = b""
+    deadline = time.monotonic() + timeout_s
+    while len(got) < n_bytes:
+        left = deadline - time.monotonic()
+        assert left > 0, f"only {len(got)} bytes from the uplink"
+        r, _, _ = select.select([pty.master], [], [], left)
+        if r:
+            got += os.read(pty.master, 65536)
+    return got
+
+
+def test_da_uplink_on_a_pty_closed_and_recreated_reconnects(tmp_path):
+    """D/A words to a serial device (the udev link of a USB adapter): the adapter is pulled
+    (pty closed) and plugged back (a new pty behind the same link): words flow again."""
+    import os
+
+    from radar_io.benchmarks.service_load import Pty
+
+    link = tmp_path / "da"
+    pty1 = Pty()
+    os.symlink(pty1.path, link)
+    svc = ServeProcess("sim://?ng_per_min=0", tmp_path / "data",
+                       extra=("--path", PATH, "--da-out", str(link), "--auto-record", "manual"))
+    pty2 = None
+    try:
+        svc.wait_ready()
+        assert len(read_pty(pty1, 4000)) >= 4000
+        up = wait_for(lambda: (u := svc.get("/api/status")["uplink"]["da"])["connected"] and u,
+                      what="connected")
+        before = up["reconnects"]
+        pty1.close()  # pulled
+        wait_for(lambda: not svc.get("/api/status")["uplink"]["da"]["connected"],
+                 what="the uplink noticed")
+        pty2 = Pty()  # plugged back: a new device behind the same link
+        os.unlink(link)
+        os.symlink(pty2.path, link)
+        assert len(read_pty(pty2, 4000)) >= 4000
+        up = svc.get("/api/status")["uplink"]["da"]
+        assert up["connected"] and up["reconnects"] > before and up["last_error"]
+    finally:
+        svc.stop()
+        pty1.close()
+        if pty2 is not None:
+            pty2.close()

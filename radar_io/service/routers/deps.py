@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import secrets
 
-from fastapi import Depends, Header, HTTPException, Request
+from fastapi import Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.requests import HTTPConnection
 
 from radar_io.service.config import TOKEN_ENV
@@ -16,17 +17,21 @@ def get_state(conn: HTTPConnection) -> ServiceState:
     return conn.app.state.service
 
 
+#: declared in the OpenAPI as the "HTTPBearer" security scheme of the control endpoints
+bearer = HTTPBearer(auto_error=False, description="the control token (RADAR_IO_TOKEN or token_file)")
+
+
 def require_token(request: Request,
-                  authorization: str | None = Header(None, description="Bearer <token>")) -> None:
+                  credentials: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:
     """Control endpoints: 403 when no token is configured or it is wrong, 401 without one."""
     token = get_state(request).token
     if token is None:
         raise HTTPException(403, f"control is disabled: no token configured (set {TOKEN_ENV} "
                             "or token_file)")
-    if not authorization or not authorization.startswith("Bearer "):
+    if credentials is None or credentials.scheme.lower() != "bearer":
         raise HTTPException(401, "control needs 'Authorization: Bearer <token>'",
                             headers={"WWW-Authenticate": "Bearer"})
-    if not secrets.compare_digest(authorization[7:].strip().encode(), token.encode()):
+    if not secrets.compare_digest(credentials.credentials.strip().encode(), token.encode()):
         raise HTTPException(403, "wrong token")
 
 

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter, Depends, HTTPException, Query
+from fastapi import APIRouter, Depends, HTTPException, Path, Query
 from fastapi.responses import FileResponse
 
 from radar_io.errors import ConflictError, StorageError
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
-from radar_io.service.state import ServiceState
+from radar_io.service.state import ID_PATTERN, ServiceState
 
 router = APIRouter(tags=["recordings"])
 
@@ -31,11 +31,12 @@ def recordings(state: ServiceState = Depends(get_state)) -> list[dict[str, Any]]
     return out
 
 
-@router.get("/api/recordings/{rec_id}", response_class=OctetStream,
+@router.get("/api/recordings/{rec_id}", response_model=None,
             responses={200: {"content": {"application/octet-stream": {
                 "schema": {"type": "string", "format": "binary"}}},
                 "description": "the .rdrlog file"}, **responses(404, 422)})
-def download(rec_id: str, state: ServiceState = Depends(get_state)) -> Any:
+def download(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+             state: ServiceState = Depends(get_state)) -> Any:
     """The .rdrlog file itself; one still being written comes as a snapshot up to its last
     whole chunk at request time (Content-Length = body, a prefix of the final file)."""
     p = state.recording_path(rec_id)
@@ -52,7 +53,9 @@ def download(rec_id: str, state: ServiceState = Depends(get_state)) -> Any:
 
 
 @router.get("/api/sync-events", responses=responses(404, 422))
-def sync_events(recording: str | None = None, limit: int = Query(1000, ge=1, le=100000),
+def sync_events(recording: str | None = Query(None, pattern=ID_PATTERN,
+                                              description="recording id; none = live"),
+                limit: int = Query(1000, ge=1, le=100000),
                 state: ServiceState = Depends(get_state)) -> list[dict[str, Any]]:
     """Sync (camera shutter) events: SYNC 0→1 edges. Live (no ``recording``): as seen,
     with SEQ, TOD, receive time and the recording that holds them. For a recording: its

@@ -11,7 +11,7 @@ from pydantic import BaseModel, Field
 from radar_io.errors import ConflictError
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
-from radar_io.service.state import ServiceState
+from radar_io.service.state import ID_PATTERN, ServiceState
 from radar_io.sources.replay import ReplaySource
 
 router = APIRouter(tags=["replay"])
@@ -19,7 +19,7 @@ _CONTROL_ERRORS = responses(401, 403, 409)
 
 
 class ReplayRequest(BaseModel):
-    recording: str = Field(description="recording id (file name without .rdrlog)")
+    recording: str = Field(pattern=ID_PATTERN, description="recording id (file name without .rdrlog)")
     speed: float = Field(1.0, ge=0.0, le=1000.0, description="× recorded pace; 0 = as fast as possible")
 
 

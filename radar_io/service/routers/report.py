@@ -6,12 +6,12 @@ from __future__ import annotations
 import io
 from typing import Literal
 
-from fastapi import APIRouter, Depends, Query
+from fastapi import APIRouter, Depends, Path, Query
 from fastapi.responses import Response
 
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import get_state
-from radar_io.service.state import ServiceState
+from radar_io.service.state import ID_PATTERN, ServiceState
 
 router = APIRouter(tags=["recordings"])
 
@@ -19,7 +19,8 @@ router = APIRouter(tags=["recordings"])
 @router.get("/api/recordings/{rec_id}/report",
             responses={200: {"content": {"text/html": {}, "application/pdf": {}}},
                        **responses(404, 422)})
-def report(rec_id: str, format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
+def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+           format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
            state: ServiceState = Depends(get_state)) -> Response:
     """Self-contained HTML (figures embedded) or a PDF, built on request (a few seconds for
     a 10-minute recording)."""

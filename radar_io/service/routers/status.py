@@ -14,7 +14,7 @@ router = APIRouter(tags=["live"])
 
 
 @router.get("/api/status")
-def status(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
+async def status(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Source, link state, framer counters, rate, lamps, recording, websocket clients and
     history, uplinks (``uplink.<name>``: connected, reconnects, last_error) and air data."""
     return state.status()
