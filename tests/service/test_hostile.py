@@ -82,9 +82,8 @@ def test_oversized_headers_431_and_bodies_413(svc):
 
 def test_every_control_endpoint_needs_the_token(svc):
     api = request(svc, "GET", "/openapi.json")[2]
-    # pure computations change nothing and need no token: coordinates, the manual runway
-    # pose; the runway upload's token is tested in test_runway_routes.py
-    free = ("/api/runway", "/api/coordinates/")
+    # pure computations change nothing and need no token: coordinates, the manual runway pose
+    free = ("/api/runway/manual", "/api/coordinates/")
     control = [(m.upper(), p) for p, ops in api["paths"].items() for m in ops
                if m in ("post", "put", "delete", "patch") and not p.startswith(free)]
     assert len(control) >= 11

@@ -23,6 +23,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
+from radar_io.service.errors import responses
 from radar_io.service.routers.deps import require_token
 from radar_io.service.runway_jobs import MAX_FRAMES, RunwayJobs
 
@@ -144,10 +145,16 @@ def _image_pose(path: Path, focal_px: float, half_width_m: float,
     return out
 
 
+_UPLOAD_BODY = {"requestBody": {"required": True, "description": "the image or video bytes",
+                                 "content": {t: {"schema": {"type": "string", "format": "binary"}}
+                                             for t in ("image/png", "image/jpeg", "video/mp4",
+                                                       "application/octet-stream")}}}
+
+
 @router.post("/api/runway", dependencies=[Depends(require_token)], status_code=200,
-             responses={202: {"description": "video accepted as a job"},
-                        413: {"description": "upload too large"},
-                        429: {"description": "job queue full"}})
+             openapi_extra=_UPLOAD_BODY,
+             responses={202: {"description": "video accepted as a job: {job, status_url}"},
+                        **responses(401, 403, 413, 422, 429)})
 async def runway(request: Request, focal_px: float = Query(gt=0, description="focal length, px"),
                  half_width_m: float = Query(gt=0, description="runway half-width d, m"),
                  cx: float | None = Query(None, description="principal point x (default centre)"),
@@ -189,7 +196,7 @@ async def runway(request: Request, focal_px: float = Query(gt=0, description="fo
                         status_code=202)
 
 
-@router.get("/api/runway/jobs/{job_id}")
+@router.get("/api/runway/jobs/{job_id}", responses=responses(404))
 def runway_job(request: Request, job_id: str) -> dict[str, Any]:
     """A video job: state (queued, running, done, failed, cancelled), frames_done,
     frames_total (null when the container does not say), result (when done: frames, found),
@@ -202,7 +209,8 @@ def runway_job(request: Request, job_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
 
 
-@router.delete("/api/runway/jobs/{job_id}", dependencies=[Depends(require_token)])
+@router.delete("/api/runway/jobs/{job_id}", dependencies=[Depends(require_token)],
+               responses=responses(401, 403, 404))
 def runway_job_cancel(request: Request, job_id: str) -> dict[str, Any]:
     """Cancel a video job (queued: at once; running: at its next frame)."""
     from radar_io.errors import NotFoundError
@@ -213,7 +221,7 @@ def runway_job_cancel(request: Request, job_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
 
 
-@router.post("/api/runway/manual")
+@router.post("/api/runway/manual", responses=responses(422))
 def runway_manual(req: PickedPoints) -> dict[str, Any]:
     """Pose from points an operator picked on the image (claims 5–6: the same maths)."""
     from radar_io.errors import VisionError
