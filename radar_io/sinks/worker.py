@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from radar_io.errors import ValidationError
 from radar_io.sinks.base import Sink
 
 log = logging.getLogger("radar_io.sinks")
@@ -98,6 +99,9 @@ class SinkWorker:
                 break
             try:
                 self.sink.write(cols)
+            except ValidationError as exc:  # this batch cannot be encoded: the link is fine
+                self._fail(exc)
+                self.dropped_samples += len(next(iter(cols.values()), ()))
             except Exception as exc:  # noqa: BLE001 - a sink failure must not kill the worker
                 self._fail(exc)
                 if self.sink.reopen:
