@@ -24,7 +24,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from radar_io.coordinates.transforms import Site
 from radar_io.errors import RadarIOError, StorageError
@@ -79,6 +79,8 @@ class Recorder:
         self._lock = threading.Lock()
         self._manual = False
         self.enabled = True  # False while replaying: replayed bytes are not recorded again
+        #: called with the path of each recording that closed cleanly (e.g. the archiver)
+        self.on_closed: Callable[[Path], None] | None = None
         self.sync_events: list[SyncEvent] = []
         self.last_error: str | None = None        #: why the wanted recording is not running
         self.storage_error: str | None = None     #: the last disk error (kept after recovery)
@@ -231,7 +233,10 @@ class Recorder:
                 w.close()
             except RadarIOError as exc:
                 self._note(exc)
-            return w.path.stem
+                return w.path.stem
+        if self.on_closed is not None:
+            self.on_closed(w.path)
+        return w.path.stem
 
     def committed_bytes(self, rec_id: str) -> int | None:
         """Bytes of the open recording ``rec_id`` up to its last whole chunk (None when

@@ -60,6 +60,7 @@ class ServiceConfig:
     mqtt_password: str | None = None  #: or RADAR_IO_MQTT_PASSWORD; never printed
     mqtt_ca_file: str | None = None  #: mqtts:// CA bundle (default: the system's CAs)
     asterix_out: str | None = None   #: ASTERIX CAT048: udp://host:port, a serial URL/device or a file
+    archive_dir: str | None = None   #: archive each closed recording as Parquet (radar-io archive layout)
     alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:

@@ -63,6 +63,13 @@ class ServiceState:
                                  auto=cfg.auto_record, preroll_s=cfg.preroll_s,
                                  retry_s=cfg.retry_s,  # storage: retry after a disk error
                                  low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
+        self.archiver: Any = None  # RecordingArchiver when archive_dir is set (started in start())
+        if cfg.archive_dir:
+            try:
+                Path(cfg.archive_dir).mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
+                                  f"{exc.strerror}") from exc
         self.runway_jobs: Any = None  # storage: RunwayJobs, created by the runway router
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
@@ -130,12 +137,24 @@ class ServiceState:
             self.air.start()
         if self.mqtt is not None:
             self.mqtt.start()  # never waits for the broker
+        if self.cfg.archive_dir:
+            from radar_io.service.archiver import RecordingArchiver
+
+            self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options)
+            self.recorder.on_closed = self.archiver.submit
         self.acq.start()
+
+    def _archive_options(self) -> dict[str, Any]:
+        """What a closed recording is archived with: the live site, spec, calibration, path."""
+        return {"site": self.site, "spec": self.spec, "calibration": self.acq.calibration,
+                "reference_path": self.path}
 
     def stop(self) -> None:
         """Stop the reader, close the recording, stop the sinks and the air-data reader."""
         self.acq.stop()
         self.recorder.close()
+        if self.archiver is not None:  # finishes the recording just closed
+            self.archiver.close()
         if self.runway_jobs is not None:  # storage: cancel runway jobs, remove their spool
             self.runway_jobs.close()
         for w in self.sinks.values():
@@ -180,6 +199,8 @@ class ServiceState:
         st = self.acq.status()
         st.update(self.hub.stats())
         st["recording"] = self.recorder.current
+        if self.archiver is not None:
+            st["archive"] = self.archiver.stats()
         st["storage"] = self.recorder.storage()  # storage: free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.acq.calibration.id
