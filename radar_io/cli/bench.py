@@ -19,6 +19,12 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--serve-seconds", type=float, default=5.0,
                    help="length of the live-service latency run: 1 kHz frames written into a "
                    "pty, 20 websocket clients (one never reading); 0 to skip")
+    p.add_argument("--outputs-hours", type=float, default=0.0, metavar="H",
+                   help="also decode an H-hour 1 kHz recording to Parquet and CSV through the "
+                   "CLI beside pyarrow anchors (fresh processes, peak RSS); 0 to skip")
+    p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
+                   help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
+                   "/api/status latency, messages per client, lost, RSS; 0 to skip")
     p.add_argument("--core-only", action="store_true",
                    help="only the decoding paths (no service latency, no plug-in benchmarks)")
     p.set_defaults(func=run)
@@ -29,8 +35,21 @@ def run(args: argparse.Namespace) -> int:
 
     result = run_bench(frames=args.frames, repeat=args.repeat, include_plugins=not args.core_only,
                        serve_seconds=0.0 if args.core_only else args.serve_seconds)
+    lines = summary_lines(result)
+    if args.outputs_hours > 0:
+        from radar_io.benchmarks import outputs
+
+        result["outputs"] = outputs.run(hours=args.outputs_hours, long_hours=0.0)
+        lines.append(outputs.report(result["outputs"]))
+    if args.fanout_clients > 0:
+        from radar_io.benchmarks.service_load import bench_fanout
+
+        fan = result["fanout"] = bench_fanout(args.fanout_clients)
+        lines.append(f"fan-out {args.fanout_clients} clients: " + ", ".join(
+            f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+            for k, v in fan.items() if not isinstance(v, (dict, list))))
     if args.json:
         print(json.dumps(result, indent=2))
     else:
-        print("\n".join(summary_lines(result)))
+        print("\n".join(lines))
     return 0
