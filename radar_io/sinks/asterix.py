@@ -121,12 +121,6 @@ class AsterixFileWriter(Sink):
         if atomic is not None:
             atomic.abort()
 
-    def __exit__(self, exc_type: object, *exc: object) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-
     def stats(self) -> dict[str, Any]:
         enc = self.encoder
         return {"records": enc.records, "blocks": enc.blocks, "bytes": self.bytes,

@@ -56,8 +56,15 @@ class Sink(ABC):
         self.open()
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def abort(self) -> None:
+        """Give up after an error: files drop what they wrote; by default the same as close()."""
         self.close()
+
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 class ByteLink(Protocol):

@@ -124,12 +124,6 @@ class TableWriter(Sink):
                 pass
             self._atomic.abort()
 
-    def __exit__(self, exc_type: object, *exc: object) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
-
     def stats(self) -> dict[str, Any]:
         return {"rows": self.rows, "format": self.format}
 
