@@ -10,6 +10,7 @@ import pytest
 
 from radar_io.decoding import batch_decoder
 from radar_io.decoding.batch_decoder import ALLOC_MODES, column_array, decode_bytes
+from radar_io.errors import ConfigError
 
 GOLDEN = Path(__file__).parent / "data" / "rdr1_golden.npz"
 
@@ -44,6 +45,24 @@ def test_large_column_is_writable_and_keeps_its_values(mode):
     assert a[-1] == 149_999.5 and a[12345] == 6172.5
 
 
-def test_unknown_mode_names_the_modes():
-    with pytest.raises(ValueError, match="huge_populate"):
+def test_unknown_mode_is_one_line_naming_the_setting_and_the_modes():
+    with pytest.raises(ConfigError, match="RADAR_IO_COLUMN_ALLOC.*huge_populate") as e:
         column_array(10, np.float64, "hugepages")
+    assert "\n" not in str(e.value)
+
+
+def test_environment_chooses_the_mode_in_a_fresh_process(tmp_path):
+    """``RADAR_IO_COLUMN_ALLOC`` is read at import; the decode is the same with huge pages."""
+    import os
+    import subprocess
+    import sys
+
+    root = str(Path(__file__).resolve().parents[1])
+    code = ("from radar_io.decoding import batch_decoder as b\n"
+            "import numpy as np\n"
+            "print(b.COLUMN_ALLOC)\n"
+            "c = b.column_array(1 << 18, np.float64); c[:] = 2.0; print(float(c.sum()))\n")
+    env = {**os.environ, "PYTHONPATH": root, "RADAR_IO_COLUMN_ALLOC": "huge_populate"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                         timeout=120, check=True).stdout.split()
+    assert out == ["huge_populate", str(2.0 * (1 << 18))]

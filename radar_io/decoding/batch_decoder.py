@@ -31,6 +31,7 @@ import numpy as np
 
 from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
 from radar_io.decoding.biases import Calibration
+from radar_io.errors import ConfigError
 from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.decoding.model import GEODETIC_COLUMNS, RUNWAY_COLUMNS, DecodeModel, value_table
 from radar_io.framing.core import BatchFramer, field_raw
@@ -55,9 +56,11 @@ def _phasor(f: FieldSpec, bias: float) -> np.ndarray:
 MMAP_BYTES = 1 << 20
 #: ``MADV_POPULATE_WRITE`` (linux/mman.h, Linux >= 5.14); ``mmap`` exports it from Python 3.12 on
 MADV_POPULATE_WRITE = getattr(mmap, "MADV_POPULATE_WRITE", 23)
-#: how large columns get their memory (:func:`column_array`); the benchmarks switch it
-COLUMN_ALLOC = "huge_populate"
 ALLOC_MODES = ("numpy", "mmap", "populate", "huge", "huge_populate")
+#: how large columns get their memory (:func:`column_array`); ``RADAR_IO_COLUMN_ALLOC``
+#: overrides it. 4 KiB pages by default: steady on the shared VM, where huge pages were
+#: 1.6x faster in most runs but 3-5x slower in others (figures in docs/decoding.md)
+COLUMN_ALLOC = os.environ.get("RADAR_IO_COLUMN_ALLOC", "mmap")
 
 
 def column_array(n: int, dtype: Any, mode: str | None = None) -> np.ndarray:
@@ -73,7 +76,8 @@ def column_array(n: int, dtype: Any, mode: str | None = None) -> np.ndarray:
     """
     mode = mode or COLUMN_ALLOC
     if mode not in ALLOC_MODES:
-        raise ValueError(f"column allocation mode {mode!r}: one of {', '.join(ALLOC_MODES)}")
+        raise ConfigError(f"column allocation mode {mode!r} (RADAR_IO_COLUMN_ALLOC): "
+                          f"one of {', '.join(ALLOC_MODES)}")
     dt = np.dtype(dtype)
     nbytes = n * dt.itemsize
     if mode == "numpy" or nbytes < MMAP_BYTES or not hasattr(mmap, "MAP_ANONYMOUS"):
