@@ -211,7 +211,7 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
             f"{r['best_vs_reference']:.1f}x; memcpy {r['bytes'] / r['memcpy_s'] / 1e9:.2f} GB/s, "
             f"first call = {r['first_call_vs_memcpy']:.3f} of memcpy; peak RSS "
             f"{r['peak_rss_mib']:.0f} MiB (input alone {r['rss_before_mib']:.0f} MiB); "
-            f"accepted {r['frames_accepted']:,}")
+            f"accepted {r['frames_accepted']:,}; columns {r.get('column_alloc', '?')}")
     for k, v in res.items():
         if k in ("machine", "frames", "repeat", "clean", "damaged_1pct"):
             continue
