@@ -66,3 +66,14 @@ def test_environment_chooses_the_mode_in_a_fresh_process(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
                          timeout=120, check=True).stdout.split()
     assert out == ["huge_populate", str(2.0 * (1 << 18))]
+
+
+@pytest.mark.parametrize("inner", [7, 1000, 4096, 16384])
+def test_inner_step_size_does_not_change_a_value(golden, inner, monkeypatch):
+    """``BatchDecoder.BLOCK`` (frames per inner step) is a speed knob only."""
+    monkeypatch.setattr(batch_decoder.BatchDecoder, "BLOCK", inner)
+    b = decode_bytes(golden["input_damaged"].tobytes())
+    assert b.stats == json.loads(str(golden["damaged/nocal/stats"]))
+    for col in b.columns:
+        want = golden[f"damaged/nocal/{col}"]
+        assert np.array_equal(b[col], want, equal_nan=want.dtype.kind == "f"), col
