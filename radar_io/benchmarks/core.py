@@ -81,11 +81,18 @@ def _usage() -> tuple[float, float, float]:
     return time.perf_counter(), r.ru_utime + r.ru_stime, peak_rss_mib()
 
 
-def child(path: str, repeat: int) -> dict[str, Any]:
-    """Run in a fresh process: first call, best of ``repeat``, anchors, peak RSS (MiB)."""
+def child(path: str, repeat: int, alloc: str | None = None) -> dict[str, Any]:
+    """Run in a fresh process: first call, best of ``repeat``, anchors, peak RSS (MiB).
+
+    ``alloc``: a ``batch_decoder.column_array`` mode for the output columns (default: the
+    decoder's own)."""
     data = Path(path).read_bytes()
     t0, c0, rss0 = _usage()
+    from radar_io.decoding import batch_decoder
     from radar_io.decoding.batch_decoder import decode_bytes
+
+    if alloc:
+        batch_decoder.COLUMN_ALLOC = alloc
 
     t1, c1, _ = _usage()
     batch = decode_bytes(data)
@@ -112,6 +119,7 @@ def child(path: str, repeat: int) -> dict[str, Any]:
         "best_of_n_s": best, "reference_s": t4 - t3, "reference_cpu_s": c4 - c3,
         "reference_frames_ok": ok, "memcpy_s": copy,
         "rss_before_mib": rss0, "peak_rss_mib": rss_first,
+        "column_alloc": batch_decoder.COLUMN_ALLOC,
         "first_call_fps": n / (t2 - t1), "best_fps": n / best, "reference_fps": n / (t4 - t3),
         "first_call_vs_reference": (t4 - t3) / (t2 - t1),
         "first_call_vs_reference_cpu": (c4 - c3) / (c2 - c1),
@@ -203,7 +211,7 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
             f"{r['best_vs_reference']:.1f}x; memcpy {r['bytes'] / r['memcpy_s'] / 1e9:.2f} GB/s, "
             f"first call = {r['first_call_vs_memcpy']:.3f} of memcpy; peak RSS "
             f"{r['peak_rss_mib']:.0f} MiB (input alone {r['rss_before_mib']:.0f} MiB); "
-            f"accepted {r['frames_accepted']:,}")
+            f"accepted {r['frames_accepted']:,}; columns {r.get('column_alloc', '?')}")
     for k, v in res.items():
         if k in ("machine", "frames", "repeat", "clean", "damaged_1pct"):
             continue
@@ -211,5 +219,5 @@ def summary_lines(res: dict[str, Any]) -> list[str]:
     return lines
 
 
-if __name__ == "__main__":  # the fresh child process: python -m radar_io.benchmarks.core FILE REPEAT
-    print(json.dumps(child(sys.argv[1], int(sys.argv[2]))))
+if __name__ == "__main__":  # the fresh child: python -m radar_io.benchmarks.core FILE REPEAT [ALLOC]
+    print(json.dumps(child(sys.argv[1], int(sys.argv[2]), sys.argv[3] if len(sys.argv) > 3 else None)))

@@ -1,8 +1,9 @@
 """Where the first ``decode_bytes`` call of a fresh process spends its time (user and system CPU).
 
-``python -m radar_io.benchmarks.first_call FILE`` (run it in a fresh process) prints the CPU
-seconds of: importing the decoder, loading the spec, building the framer and decoder tables,
-framing, and decoding into fresh output columns (system time = page faults).
+``python -m radar_io.benchmarks.first_call FILE [ALLOC]`` (run it in a fresh process) prints
+the CPU seconds of: importing the decoder, loading the spec, building the framer and decoder
+tables, allocating the output columns, framing, and decoding into them (system time = page
+faults). ALLOC is a ``batch_decoder.column_array`` mode (default: the decoder's default).
 """
 
 from __future__ import annotations
@@ -17,10 +18,12 @@ def _cpu() -> tuple[float, float]:
     return r.ru_utime, r.ru_stime
 
 
-def breakdown(path: str, block_frames: int = 1 << 16) -> dict[str, tuple[float, float]]:
+def breakdown(path: str, block_frames: int = 1 << 16, alloc: str | None = None
+              ) -> dict[str, tuple[float, float]]:
     """(user s, sys s) per stage of one chunked decode of the file, as ``decode_bytes`` does it."""
     data = Path(path).read_bytes()
     marks = [("start", _cpu())]
+    from radar_io.decoding import batch_decoder
     from radar_io.decoding.batch_decoder import BatchDecoder
     from radar_io.framing.core import BatchFramer
     from radar_io.wirespec.frame import load_spec
@@ -30,7 +33,10 @@ def breakdown(path: str, block_frames: int = 1 << 16) -> dict[str, tuple[float, 
     marks.append(("spec", _cpu()))
     framer, dec = BatchFramer(spec), BatchDecoder(spec)
     marks.append(("tables", _cpu()))
+    if alloc:
+        batch_decoder.COLUMN_ALLOC = alloc
     out = dec.allocate(len(data) // spec.length)
+    marks.append(("allocate", _cpu()))
     mv = memoryview(data)
     s, framing, decoding = 0, [0.0, 0.0], [0.0, 0.0]
     step = block_frames * spec.length
@@ -50,5 +56,12 @@ def breakdown(path: str, block_frames: int = 1 << 16) -> dict[str, tuple[float, 
 
 
 if __name__ == "__main__":
-    for stage, (user, system) in breakdown(sys.argv[1]).items():
+    alloc = sys.argv[2] if len(sys.argv) > 2 else None
+    total = [0.0, 0.0]
+    for stage, (user, system) in breakdown(sys.argv[1], alloc=alloc).items():
+        if stage in ("allocate", "framing", "decoding"):
+            total[0] += user
+            total[1] += system
         print(f"{stage:9s} user {user:.3f} s  sys {system:.3f} s")
+    print(f"{'alloc+frame+decode':9s} user {total[0]:.3f} s  sys {total[1]:.3f} s  "
+          f"({alloc or 'default'})")

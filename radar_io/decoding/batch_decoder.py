@@ -31,6 +31,7 @@ import numpy as np
 
 from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
 from radar_io.decoding.biases import Calibration
+from radar_io.errors import ConfigError
 from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.decoding.model import GEODETIC_COLUMNS, RUNWAY_COLUMNS, DecodeModel, value_table
 from radar_io.framing.core import BatchFramer, field_raw
@@ -53,22 +54,47 @@ def _phasor(f: FieldSpec, bias: float) -> np.ndarray:
 
 #: columns at least this large come from an anonymous mmap (see :func:`column_array`)
 MMAP_BYTES = 1 << 20
+#: ``MADV_POPULATE_WRITE`` (linux/mman.h, Linux >= 5.14); ``mmap`` exports it from Python 3.12 on
+MADV_POPULATE_WRITE = getattr(mmap, "MADV_POPULATE_WRITE", 23)
+ALLOC_MODES = ("numpy", "mmap", "populate", "huge", "huge_populate")
+#: how large columns get their memory (:func:`column_array`); ``RADAR_IO_COLUMN_ALLOC``
+#: overrides it. 4 KiB pages by default: steady on the shared VM, where huge pages were
+#: 1.6x faster in most runs but 3-5x slower in others (figures in docs/decoding.md)
+COLUMN_ALLOC = os.environ.get("RADAR_IO_COLUMN_ALLOC", "mmap")
 
 
-def column_array(n: int, dtype: Any) -> np.ndarray:
+def column_array(n: int, dtype: Any, mode: str | None = None) -> np.ndarray:
     """An uninitialised 1-D column of ``n`` items; large ones in their own anonymous mmap.
 
-    numpy asks the kernel for transparent huge pages on large arrays. On the
-    shared test VM, writing 229 MiB of fresh float64 columns cost 0.02-0.50 s of
-    system time with numpy's huge pages (median about 0.37 s, 4 runs) and a steady
-    0.09-0.11 s with the 4 KiB pages of a plain anonymous mapping, which is what
-    this gives. The mapping is released with the array.
+    ``mode`` (default :data:`COLUMN_ALLOC`): ``numpy`` (``np.empty``), ``mmap`` (4 KiB
+    pages, one fault each on first write), ``populate`` (``MAP_POPULATE``: faulted in by
+    the kernel at ``mmap``), ``huge`` (``MADV_HUGEPAGE``: one fault per 2 MiB),
+    ``huge_populate`` (``MADV_HUGEPAGE`` then ``MADV_POPULATE_WRITE``: the whole column
+    faulted in by one call). Advice the kernel refuses is skipped (the mapping still
+    works with 4 KiB pages). The mapping is released with the array. Figures in
+    docs/decoding.md.
     """
+    mode = mode or COLUMN_ALLOC
+    if mode not in ALLOC_MODES:
+        raise ConfigError(f"column allocation mode {mode!r} (RADAR_IO_COLUMN_ALLOC): "
+                          f"one of {', '.join(ALLOC_MODES)}")
     dt = np.dtype(dtype)
     nbytes = n * dt.itemsize
-    if nbytes < MMAP_BYTES or not hasattr(mmap, "MAP_ANONYMOUS"):
+    if mode == "numpy" or nbytes < MMAP_BYTES or not hasattr(mmap, "MAP_ANONYMOUS"):
         return np.empty(n, dtype=dt)
-    buf = mmap.mmap(-1, nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+    flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+    if mode == "populate":
+        flags |= getattr(mmap, "MAP_POPULATE", 0)
+    buf = mmap.mmap(-1, nbytes, flags=flags)
+    advice = {"huge": ("MADV_HUGEPAGE",), "huge_populate": ("MADV_HUGEPAGE", "POPULATE_WRITE")}
+    for name in advice.get(mode, ()):
+        opt = MADV_POPULATE_WRITE if name == "POPULATE_WRITE" else getattr(mmap, name, None)
+        if opt is None or not hasattr(buf, "madvise"):
+            continue
+        try:
+            buf.madvise(opt)
+        except OSError:   # kernel without THP or MADV_POPULATE_WRITE: 4 KiB faults on write
+            pass
     return np.frombuffer(buf, dtype=dt, count=n)
 
 
@@ -93,8 +119,9 @@ def _coalesce(blocks: list[np.ndarray], rows: int) -> Iterator[np.ndarray]:
 class BatchDecoder:
     """Vectorised decoder of framed words (N, L/2) → columns; the twin of ``FrameDecoder``."""
 
-    #: frames decoded per inner step; temporaries stay in the CPU cache
-    BLOCK = 8192
+    #: frames decoded per inner step; temporaries stay in the CPU cache (8 192 → 16 384 cut
+    #: the per-call overhead: decoding 0.040 → 0.033 s user for 2 M frames; 32 768 faults)
+    BLOCK = 16384
 
     def __init__(self, spec: FrameSpec | None = None, calibration: Calibration | None = None,
                  site: Site | None = None) -> None:
