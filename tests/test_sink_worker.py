@@ -73,3 +73,23 @@ def test_a_failed_link_is_reopened_and_counted():
         assert np.isin([1, 5], sink.rows).all()
     finally:
         w.close()
+
+
+class RefusingLink(ListSink):
+    """Opens every time, but every write fails (a UDP peer answering ECONNREFUSED)."""
+
+    def write(self, batch) -> int:
+        raise UplinkError("write: connection refused")
+
+
+def test_the_back_off_grows_while_writes_keep_failing():
+    sink = RefusingLink({})
+    w = SinkWorker("t", sink)
+    try:
+        for s in range(400):
+            w.submit([{"seq": s, "sr_m": 0.0}])
+            time.sleep(0.005)
+        # 0.1 + 0.2 + 0.4 + 0.8 s of back-off fit in the 2 s: at most ~5 reopens, not 20
+        assert 2 <= sink.opens <= 6, sink.opens
+    finally:
+        w.close()

@@ -90,7 +90,7 @@ class Recorder:
         self._retry = False                       #: an automatic recording failed: retry it
         if auto == "always":
             self._want = "always"
-            self._try_auto()
+            self._retry = True  # opened by the first chunk: no file before data flows
 
     # -- called by the reader thread ---------------------------------------------------------
     def on_chunk(self, data: bytes, t_ns: int) -> None:

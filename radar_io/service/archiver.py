@@ -37,7 +37,6 @@ class RecordingArchiver:
 
     def _run(self) -> None:
         from radar_io.analysis.archive import archive_recording
-        from radar_io.errors import RadarIOError
 
         while True:
             path = self.q.get()
@@ -49,7 +48,7 @@ class RecordingArchiver:
                 self.archived += 1
                 self.last = str(res.path)
                 log.info("archived %s → %s (%d rows)", path.name, res.path, res.rows)
-            except (RadarIOError, OSError) as exc:
+            except Exception as exc:  # noqa: BLE001 - a failed archive never stops the next
                 self.errors += 1
                 self.last_error = f"{path.name}: {exc}"
                 log.warning("archive of %s failed: %s", path.name, exc)

@@ -53,14 +53,11 @@ class GuardMiddleware:
         self.allowed = frozenset(o.strip().rstrip("/").lower() for o in allowed_origins)
         self.max_header_bytes = max_header_bytes
         self.max_body_bytes = max_body_bytes
-        self.body_limits = dict(body_limits or {})  # path prefix → bytes
+        self.body_limits = dict(body_limits or {})  # exact path → bytes
         self.refused_origin = 0
 
     def _body_limit(self, path: str) -> int:
-        for prefix, limit in self.body_limits.items():
-            if path.startswith(prefix):
-                return limit
-        return self.max_body_bytes
+        return self.body_limits.get(path.rstrip("/"), self.max_body_bytes)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         kind = scope["type"]

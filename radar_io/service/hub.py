@@ -246,8 +246,9 @@ class Hub:
 
     @property
     def dropped(self) -> int:
-        return self._dropped_closed + sum(c.dropped for c in self.clients) + \
-            self.undispatched * len(self.clients)
+        clients = tuple(self.clients)  # other threads read this while the loop adds clients
+        return self._dropped_closed + sum(c.dropped for c in clients) + \
+            self.undispatched * len(clients)
 
     def stats(self) -> dict[str, Any]:
         return {"ws_clients": len(self.clients), "ws_dropped": self.dropped,

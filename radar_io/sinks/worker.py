@@ -65,12 +65,13 @@ class SinkWorker:
             log.warning("%s sink: %s", self.name, exc)
 
     def _connect(self, backoff: float) -> float:
-        """Open the sink, retrying with back-off until it opens or the worker stops."""
+        """Open the sink, retrying with back-off until it opens or the worker stops; the
+        back-off it ends with (reset to the start only by a successful write)."""
         while not self._stop.is_set():
             try:
                 self.sink.open()
                 self.connected = True
-                return BACKOFF_START_S
+                return backoff
             except Exception as exc:  # noqa: BLE001 - any open failure is retried
                 self._fail(exc)
                 self._drain()
@@ -99,6 +100,7 @@ class SinkWorker:
                 break
             try:
                 self.sink.write(cols)
+                backoff = BACKOFF_START_S
             except ValidationError as exc:  # this batch cannot be encoded: the link is fine
                 self._fail(exc)
                 self.dropped_samples += len(next(iter(cols.values()), ()))

@@ -29,11 +29,20 @@ class AirDataReader:
 
     def __init__(self, interface: str, channel: str, latest_radar: Any,
                  bitrate: int | None = None, keep: int = 8 * 600) -> None:
-        from radar_io.sources.canbus import open_bus
-        from radar_io.decoding.airdata import AirDataDecoder, load_dbc
+        import can
 
+        from radar_io.decoding.airdata import AirDataDecoder, load_dbc
+        from radar_io.errors import ConfigError
+
+        if interface not in can.interfaces.VALID_INTERFACES:
+            raise ConfigError(f"can: unknown python-can interface {interface!r} (known: "
+                              f"{', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
         self.url = f"{interface}:{channel}"
-        self.bus = open_bus(interface, channel, bitrate)
+        self._open_args = (interface, channel, bitrate)
+        self.bus: Any = None           # opened (and reopened) by the reader thread
+        self.connected = False
+        self.reconnects = 0
+        self.last_error: str | None = None
         self.decoder = AirDataDecoder(load_dbc())
         self.latest_radar = latest_radar  # () -> the newest radar message or None
         self.samples: deque[dict[str, Any]] = deque(maxlen=keep)
@@ -48,14 +57,39 @@ class AirDataReader:
         if not self._thread.is_alive():
             self._thread.start()
 
+    def _drop_bus(self, exc: Exception) -> None:
+        """The bus failed (adapter pulled, interface down): close it; the loop reopens it."""
+        msg = str(exc)
+        if msg != self.last_error:  # one log line per distinct error
+            log.warning("CAN %s: %s", self.url, msg)
+        self.last_error, self.connected = msg, False
+        bus, self.bus = self.bus, None
+        if bus is not None:
+            try:
+                bus.shutdown()
+            except Exception:  # noqa: BLE001 - it is gone anyway
+                pass
+
     def _run(self) -> None:
+        from radar_io.sources.canbus import open_bus
+
         pending: dict[str, float] | None = None
+        backoff, opened_before = 0.1, False
         while not self._stop.is_set():
+            if self.bus is None:
+                try:
+                    self.bus = open_bus(*self._open_args)
+                except Exception as exc:  # noqa: BLE001 - absent adapter: retry with back-off
+                    self._drop_bus(exc)
+                    self._stop.wait(backoff)
+                    backoff = min(backoff * 2, 5.0)
+                    continue
+                self.reconnects += opened_before
+                opened_before, self.connected, backoff = True, True, 0.1
             try:
                 m = self.bus.recv(0.2)
-            except Exception as exc:  # noqa: BLE001 - keep reading; report once per error
-                log.warning("CAN %s: %s", self.url, exc)
-                self._stop.wait(1.0)
+            except Exception as exc:  # noqa: BLE001 - reopen with back-off
+                self._drop_bus(exc)
                 continue
             if m is None:
                 continue
@@ -103,7 +137,8 @@ class AirDataReader:
 
     def stats(self) -> dict[str, Any]:
         d = self.decoder
-        return {"source": self.url, "samples_received": self._seq,
+        return {"source": self.url, "connected": self.connected, "reconnects": self.reconnects,
+                "last_error": self.last_error, "samples_received": self._seq,
                 "shutter_events": self.shutter_events,
                 "messages": d.messages, "unknown": d.unknown, "undecodable": d.undecodable,
                 "last_sample_age_s": (time.time_ns() - self.samples[-1]["t_ns"]) / 1e9
@@ -113,7 +148,9 @@ class AirDataReader:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(2)
-        try:
-            self.bus.shutdown()
-        except Exception:  # noqa: BLE001
-            pass
+        bus, self.bus = self.bus, None
+        if bus is not None:
+            try:
+                bus.shutdown()
+            except Exception:  # noqa: BLE001
+                pass

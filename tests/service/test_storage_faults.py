@@ -255,13 +255,14 @@ def test_kill_9_while_recording_loses_no_frame(tmp_path):
                            extra=("--auto-record", "always"))
         try:
             svc.wait_ready()
-            wait_for(lambda: svc.get("/api/status")["recording"], what="recording")
+            assert svc.get("/api/status")["recording"] is None  # "always" opens on the first data
             n = 3000 + 1000 * run
             data = b"".join(independent.frame(seq=i, tod=i, sts=5) for i in range(n))
             for k in range(0, len(data), 2400):  # 100 frames per write, 1 kHz pace
                 pty.write(data[k:k + 2400])
                 time.sleep(0.1)
             wait_for(lambda: svc.get("/api/status")["frames"] == n, what="all frames decoded")
+            assert svc.get("/api/status")["recording"]
             os.kill(svc.proc.pid, signal.SIGKILL)
             svc.proc.wait()
         finally:
