@@ -21,7 +21,7 @@ from conftest import ROOT, run_cli
 from radar_io.decoding.decoders import POSITION_COLUMNS, decode_bytes
 from radar_io.recording.rdrlog import RecordingReader
 from radar_io.sinks import TABLE_FORMATS, open_table, table_format
-from radar_io.sinks.arrow_table import batch_to_arrow, file_sha256, read_metadata
+from radar_io.sinks.arrow_convert import batch_to_arrow, file_sha256, read_metadata
 
 FORMATS = tuple(TABLE_FORMATS)
 

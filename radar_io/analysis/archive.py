@@ -101,9 +101,9 @@ def archive_recording(path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     Idempotent: an up-to-date file is left alone unless ``force``.
     """
     from radar_io.coordinates.reference_path import add_deviation
-    from radar_io.decoding.decoders import iter_decode
+    from radar_io.decoding.batch_decoder import iter_decode
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
-    from radar_io.sinks.arrow_table import file_sha256, output_metadata
+    from radar_io.sinks.arrow_convert import file_sha256, output_metadata
     from radar_io.sinks.table_parquet import ParquetTableWriter
     from radar_io.wirespec.frame import load_spec
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.decoding.decoders import MeasurementBatch
+from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.decoding.airdata import AircraftLog, load_dbc, read_can_log
 from radar_io.errors import AirborneError
 from radar_io.simulation.aircraft import FT_M, expected_pa_minus_h
@@ -84,7 +84,7 @@ def radar_track(batches: Iterable[MeasurementBatch]) -> RadarTrack:
 
 def read_radar_track(path: str | os.PathLike[str], spec: Any = None) -> RadarTrack:
     """Decode a ``.rdrlog`` (or raw capture) into a :class:`RadarTrack`."""
-    from radar_io.decoding.decoders import iter_decode
+    from radar_io.decoding.batch_decoder import iter_decode
     from radar_io.recording.rdrlog import iter_payloads
 
     if not os.path.isfile(path):

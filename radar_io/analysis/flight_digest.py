@@ -113,7 +113,7 @@ def digest_recording(path: str | os.PathLike[str], *, site: Site | None = None,
                      progress: Callable[[int, int], None] | None = None) -> FlightDigest:
     """Decode a recording (or raw capture) into a :class:`FlightDigest`."""
     from radar_io.coordinates.reference_path import add_deviation
-    from radar_io.decoding.decoders import iter_decode
+    from radar_io.decoding.batch_decoder import iter_decode
     from radar_io.recording.rdrlog import ReadReport, RecordingReader, is_recording, iter_payloads
 
     if not os.path.isfile(path):

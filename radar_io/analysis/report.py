@@ -213,7 +213,7 @@ def _airdata(d: FlightDigest, can_log: str | os.PathLike[str], dbc: Any = None
     """Align the CAN log to the radar's sync edges; PA − H per 8 Hz sample."""
     from radar_io.analysis.clock_alignment import compare_altitude, fit_clock, radar_track
     from radar_io.decoding.airdata import load_dbc, read_can_log
-    from radar_io.decoding.decoders import MeasurementBatch
+    from radar_io.decoding.measurement import MeasurementBatch
 
     c = d.columns
     track = radar_track([MeasurementBatch({k: c[k] for k in ("tod_s", "sync", "rx_good", "h_m",

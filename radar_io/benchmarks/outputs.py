@@ -63,7 +63,7 @@ def anchor(fmt: str, src: str, out: str) -> None:
     import pyarrow as pa
 
     fmt, _, sync = fmt.partition("+")
-    from radar_io.decoding.decoders import decode_bytes
+    from radar_io.decoding.batch_decoder import decode_bytes
     from radar_io.recording.rdrlog import iter_payloads
 
     data = b"".join(iter_payloads(src))

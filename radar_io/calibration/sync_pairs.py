@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.decoding.decoders import iter_decode
+from radar_io.decoding.batch_decoder import iter_decode
 from radar_io.recording.rdrlog import iter_payloads
 from radar_io.wirespec.frame import FrameSpec
 

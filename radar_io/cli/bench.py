@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from typing import Any
 
 
@@ -48,8 +49,8 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"fan-out {args.fanout_clients} clients: " + ", ".join(
             f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
             for k, v in fan.items() if not isinstance(v, (dict, list))))
-    if args.json:
-        print(json.dumps(result, indent=2))
-    else:
-        print("\n".join(lines))
+    try:
+        print(json.dumps(result, indent=2) if args.json else "\n".join(lines), flush=True)
+    except BrokenPipeError:  # `radar-io bench --json | head`: the reader left, stop quietly
+        sys.stderr.close()
     return 0

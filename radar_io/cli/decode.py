@@ -38,11 +38,11 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from radar_io.decoding.decoders import iter_decode
+    from radar_io.decoding.batch_decoder import iter_decode
     from radar_io.coordinates.reference_path import add_deviation
     from radar_io.cli.progress import Progress
     from radar_io.sinks import open_sink, open_table
-    from radar_io.sinks.arrow_table import output_metadata
+    from radar_io.sinks.arrow_convert import output_metadata
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
 
     common = load_common(args)

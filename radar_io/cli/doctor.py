@@ -131,7 +131,7 @@ def check_disk(data_dir: str) -> Check:
 def check_source(url: str, timeout_s: float = 3.0, spec: Any = None) -> Check:
     """Open the source and read until an RDR1 frame passes the framer or ``timeout_s`` ends."""
     from radar_io.errors import RadarIOError
-    from radar_io.framing.framers import BatchFramer
+    from radar_io.framing.core import BatchFramer
     from radar_io.sources import open_source
     from radar_io.wirespec.frame import load_spec
 

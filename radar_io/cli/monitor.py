@@ -19,8 +19,8 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from radar_io.decoding.decoders import FrameDecoder
-    from radar_io.framing.framers import Framer
+    from radar_io.decoding.frame_decoder import FrameDecoder
+    from radar_io.framing.core import Framer
     from radar_io.sources import open_source
     from radar_io.sources.reconnect import ReconnectingSource
 

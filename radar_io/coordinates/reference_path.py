@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.decoding.decoders import MeasurementBatch
+from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.textfiles import Fields, read_toml
 from radar_io.errors import ConfigError
 

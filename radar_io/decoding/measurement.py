@@ -36,7 +36,7 @@ class MeasurementBatch:
         """A :class:`pyarrow.RecordBatch` of the columns in decode order, zero-copy from numpy
         where the dtype allows; units in each field's metadata, NaN (no value) as null.
         ``metadata`` goes into the schema as ``radar_io.<key>``. Imports pyarrow."""
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         return batch_to_arrow(self, metadata)
 

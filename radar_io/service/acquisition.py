@@ -19,9 +19,9 @@ from typing import Any
 import numpy as np
 
 from radar_io.decoding.biases import Calibration
-from radar_io.decoding.decoders import FrameDecoder
+from radar_io.decoding.frame_decoder import FrameDecoder
 from radar_io.errors import RecordingError
-from radar_io.framing.framers import Framer
+from radar_io.framing.core import Framer
 from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
 from radar_io.sources import ByteSource, open_source
 from radar_io.sources.reconnect import ReconnectingSource

@@ -176,7 +176,7 @@ class AlarmEngine:
                 self._changed()
 
     def check_status(self, status: dict[str, Any], now_s: float | None = None) -> None:
-        """Built-in alarms from the service status dict (see :meth:`Service.status`) and
+        """Built-in alarms from the service status dict (see :meth:`~radar_io.service.state.ServiceState.status`) and
         ``disk_free_bytes``."""
         now = time.time() if now_s is None else now_s
         with self._lock:
@@ -355,17 +355,21 @@ def read_events(path: Path) -> list[dict[str, Any]]:
 
 # ---------------------------------------------------------------------- service glue
 def attach_alarms(svc: Any) -> AlarmEngine:
-    """An engine for a :class:`~radar_io.service.app.Service`: rules from ``cfg.alarms``,
+    """An engine for a :class:`~radar_io.service.state.ServiceState`: rules from ``cfg.alarms``,
     fed the decoded messages (an acquisition processor), events to the open recording's
     event log, changes pushed on the websocket. Start :func:`status_loop` in the lifespan."""
     from radar_io.coordinates.reference_path import DEVIATION_COLUMNS
-    from radar_io.decoding.decoders import output_columns
+    from radar_io.decoding.model import output_columns
 
     columns = [*output_columns(svc.spec, svc.site), "t_ns"]
     if getattr(svc, "path", None) is not None:
         columns += DEVIATION_COLUMNS
-    rules, builtin = parse_alarm_config(getattr(svc.cfg, "alarms", None) or [], "config",
-                                        columns)
+    entries = getattr(svc.cfg, "alarms", None) or []
+    rules, builtin = parse_alarm_config(entries, "config", columns)
+    low_mb = getattr(svc.cfg, "low_space_mb", None)
+    if low_mb is not None and builtin.get("low_disk") is not None and \
+            not any(e.get("builtin") == "low_disk" for e in entries):
+        builtin["low_disk"] = float(low_mb) * (1 << 20)  # the status's low_space threshold
     publish = getattr(svc.hub, "publish_event_threadsafe", None)
 
     def on_change(alarms: list[dict[str, Any]]) -> None:

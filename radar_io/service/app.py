@@ -3,7 +3,7 @@
 air data) start and stop in the lifespan.
 
 Routers, one per concern (``service/routers/``): status, live (track, ws, site, path,
-airdata), recordings, replay, calibration, coordinates, runway. Errors: one body shape, radar_io
+airdata), recordings, replay, calibration, coordinates, runway, alarms, report. Errors: one body shape, radar_io
 errors mapped by class (:mod:`radar_io.service.errors`). Origin, header and body limits:
 :mod:`radar_io.service.guard`.
 """
@@ -64,7 +64,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     install_error_handlers(app)
     for module in (status, live, recordings, replay, calibration, coordinates, alarms, report):
         app.include_router(module.router)
-    # runway vision is the storage helper's router; it adds the control token itself
+    # the runway router declares its own token dependencies (the manual pose needs none)
     app.include_router(runway.router, responses=responses(401, 403, 429))
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
 

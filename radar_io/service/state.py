@@ -3,12 +3,14 @@
 Built once by :func:`radar_io.service.app.build_app` (everything that can be refused
 is refused here, before the server binds), started and stopped by the app's lifespan
 (:meth:`ServiceState.start`, :meth:`ServiceState.stop`): the reader thread, the sink
-workers (TLM1, D/A) and the CAN air-data reader.
+workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver and the CAN
+air-data reader. Nothing opens a file, a device or a connection before ``start``.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import re
 import secrets
 from pathlib import Path
@@ -25,6 +27,8 @@ from radar_io.service.history import History
 from radar_io.service.hub import Hub
 from radar_io.sources.replay import ReplaySource
 from radar_io.wirespec.frame import load_spec
+
+log = logging.getLogger("radar_io.service")
 
 #: a recording or calibration id: a plain file name
 ID_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$"
@@ -61,7 +65,7 @@ class ServiceState:
                        cfg.ws_batch_interval_s)
         self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
                                  auto=cfg.auto_record, preroll_s=cfg.preroll_s,
-                                 retry_s=cfg.retry_s,  # storage: retry after a disk error
+                                 retry_s=cfg.retry_s,  # automatic recording: retry after a disk error
                                  low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
         self.archiver: Any = None  # RecordingArchiver when archive_dir is set (started in start())
         if cfg.archive_dir:
@@ -70,7 +74,7 @@ class ServiceState:
             except OSError as exc:
                 raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
                                   f"{exc.strerror}") from exc
-        self.runway_jobs: Any = None  # storage: RunwayJobs, created by the runway router
+        self.runway_jobs: Any = None  # RunwayJobs, created by the runway router on first use
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
@@ -150,19 +154,23 @@ class ServiceState:
                 "reference_path": self.path}
 
     def stop(self) -> None:
-        """Stop the reader, close the recording, stop the sinks and the air-data reader."""
-        self.acq.stop()
-        self.recorder.close()
+        """Stop the reader, close the recording, finish archiving, cancel runway jobs, stop
+        the sinks, the MQTT publisher and the air-data reader — each even if one fails."""
+        steps = [("reader", self.acq.stop), ("recorder", self.recorder.close)]
         if self.archiver is not None:  # finishes the recording just closed
-            self.archiver.close()
-        if self.runway_jobs is not None:  # storage: cancel runway jobs, remove their spool
-            self.runway_jobs.close()
-        for w in self.sinks.values():
-            w.close()
+            steps.append(("archiver", self.archiver.close))
+        if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files
+            steps.append(("runway jobs", self.runway_jobs.close))
+        steps += [(f"sink {n}", w.close) for n, w in self.sinks.items()]
         if self.mqtt is not None:
-            self.mqtt.close()  # last word on PREFIX/status: {"online": false}
+            steps.append(("mqtt", self.mqtt.close))  # last word on PREFIX/status: offline
         if self.air is not None:
-            self.air.close()
+            steps.append(("air data", self.air.close))
+        for name, step in steps:
+            try:
+                step()
+            except Exception:  # noqa: BLE001 - the other workers must still stop
+                log.exception("stopping %s", name)
 
     # -- helpers for the routers ------------------------------------------------------------
     def latest_radar(self) -> dict[str, Any] | None:
@@ -201,7 +209,7 @@ class ServiceState:
         st["recording"] = self.recorder.current
         if self.archiver is not None:
             st["archive"] = self.archiver.stats()
-        st["storage"] = self.recorder.storage()  # storage: free_bytes, low_space, last_error
+        st["storage"] = self.recorder.storage()  # free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.acq.calibration.id
         st["control_enabled"] = self.token is not None

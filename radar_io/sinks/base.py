@@ -7,7 +7,7 @@ checks the target (a malformed URL is refused at once, before anything starts);
 sources' back-off (0.1 s doubling to 5 s) after a failed open or write.
 
 Byte-oriented outputs (TLM1 frames, D/A words, ASTERIX blocks) are an *encoder* in
-front of a :class:`~radar_io.sinks.links.ByteLink` (file, serial port, UDP):
+front of a :class:`~radar_io.sinks.base.ByteLink` (file, serial port, UDP):
 :class:`EncoderSink`.
 """
 

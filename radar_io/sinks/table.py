@@ -1,7 +1,7 @@
 """Table outputs of measurements: one writer per file format, all behind :class:`TableWriter`.
 
 Every format gets the same columns in the same order (the decode order) and the
-same file metadata (:func:`~radar_io.sinks.arrow_table.output_metadata`). A file is
+same file metadata (:func:`~radar_io.sinks.arrow_convert.output_metadata`). A file is
 written under a temporary name beside the target and renamed when
 :meth:`TableWriter.close` finishes it (:class:`~radar_io.sinks.atomic.AtomicFile`), so
 an interrupted decode never leaves a file that looks complete. Writers stream:
@@ -150,7 +150,7 @@ def _columns(batch: Batch) -> tuple[str, ...]:
 
 def _empty_batch() -> Any:
     """A zero-row batch with the default decoder's columns (a file with no frames)."""
-    from radar_io.decoding.decoders import BatchDecoder
+    from radar_io.decoding.batch_decoder import BatchDecoder
 
     dec = BatchDecoder()
     return dec.batch(np.empty((0, dec.spec.length // 2), np.uint16), {})

@@ -19,13 +19,13 @@ class ArrowTableWriter(TableWriter):
     def _start(self, batch: Batch) -> None:
         import pyarrow as pa
 
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         self._schema = batch_to_arrow(batch, self.metadata).schema
         self._writer: Any = pa.ipc.new_file(self._out, self._schema)
 
     def _write(self, batch: Batch) -> None:
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         self._writer.write_batch(batch_to_arrow(batch, schema=self._schema))
 

@@ -20,7 +20,7 @@ class CsvTableWriter(TableWriter):
     def _start(self, batch: Batch) -> None:
         import pyarrow.csv as pcsv
 
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         rb = batch_to_arrow(batch, self.metadata)
         self._schema = rb.schema
@@ -29,7 +29,7 @@ class CsvTableWriter(TableWriter):
         self._writer: Any = pcsv.CSVWriter(self._out, rb.schema, write_options=opts)
 
     def _write(self, batch: Batch) -> None:
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         self._writer.write_batch(batch_to_arrow(batch, schema=self._schema))
 

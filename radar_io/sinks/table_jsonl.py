@@ -19,7 +19,7 @@ class JsonlTableWriter(TableWriter):
     ROWS_PER_WRITE = 65536
 
     def _start(self, batch: Batch) -> None:
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         self._schema = batch_to_arrow(batch, self.metadata).schema
 
@@ -27,7 +27,7 @@ class JsonlTableWriter(TableWriter):
         import pyarrow as pa
         import pyarrow.compute as pc
 
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         rb = batch_to_arrow(batch, schema=self._schema)
         for s in range(0, rb.num_rows, self.ROWS_PER_WRITE):

@@ -27,7 +27,7 @@ class ParquetTableWriter(TableWriter):
     def _start(self, batch: Batch) -> None:
         import pyarrow.parquet as pq
 
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         self._schema = batch_to_arrow(batch, self.metadata).schema
         import pyarrow as pa
@@ -42,7 +42,7 @@ class ParquetTableWriter(TableWriter):
         self._pending_rows = 0
 
     def _write(self, batch: Batch) -> None:
-        from radar_io.sinks.arrow_table import batch_to_arrow
+        from radar_io.sinks.arrow_convert import batch_to_arrow
 
         rb = batch_to_arrow(batch, schema=self._schema)
         self._pending.append(rb)
@@ -68,7 +68,7 @@ class ParquetTableWriter(TableWriter):
 
             self._writer.write_table(pa.Table.from_batches([], self._schema))
         if self.final_metadata:  # file key-value metadata, in the footer
-            from radar_io.sinks.arrow_table import META_PREFIX
+            from radar_io.sinks.arrow_convert import META_PREFIX
 
             self._writer.add_key_value_metadata(
                 {f"{META_PREFIX}{k}": str(v) for k, v in self.final_metadata.items()})

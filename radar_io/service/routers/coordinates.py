@@ -10,6 +10,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Request
 from pydantic import BaseModel, Field, model_validator
 
+from radar_io.service.errors import responses
+
 MAX_POINTS = 10_000  #: points accepted in one request (3 columns fit the 1 MiB body limit)
 
 router = APIRouter(tags=["coordinates"])
@@ -33,7 +35,7 @@ class RunwayPoints(BaseModel):
         return self
 
 
-@router.post("/api/coordinates/runway-to-radar")
+@router.post("/api/coordinates/runway-to-radar", responses=responses(404))
 def runway_to_radar(req: RunwayPoints, request: Request) -> dict[str, Any]:
     """Radar rectangular X (north), Y (east), H (up) [m] of runway-frame points, eqs. (2-9)…
     (2-11) inverted, with the configured site's runway heading and radar position."""

@@ -93,3 +93,7 @@ async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", g
     finally:
         hub.unregister(client)
         sender.cancel()
+        try:
+            await sender  # its exception (a client gone mid-send) is retrieved, not logged
+        except BaseException:  # noqa: BLE001 - cancelled or the connection's error
+            pass

@@ -40,7 +40,7 @@ def download(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     """The .rdrlog file itself; one still being written comes as a snapshot up to its last
     whole chunk at request time (Content-Length = body, a prefix of the final file)."""
     p = state.recording_path(rec_id)
-    size = state.recorder.committed_bytes(rec_id)  # storage: snapshot of an open recording
+    size = state.recorder.committed_bytes(rec_id)  # an open recording: its committed prefix
     if size is not None:
         from fastapi.responses import StreamingResponse
 
@@ -77,7 +77,7 @@ def rec_start(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
         raise ConflictError("cannot record while replaying")
     try:
         return {"recording": state.recorder.start("manual")}
-    except StorageError as exc:  # storage: 507 no room (ENOSPC, EDQUOT, EFBIG), else 503
+    except StorageError as exc:  # 507 no room (ENOSPC, EDQUOT, EFBIG), else 503
         raise HTTPException(state.recorder.http_status(exc), str(exc)) from exc
 
 

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import io
+import threading
 from typing import Literal
 
 from fastapi import APIRouter, Depends, Path, Query
@@ -14,6 +15,8 @@ from radar_io.service.routers.deps import get_state
 from radar_io.service.state import ID_PATTERN, ServiceState
 
 router = APIRouter(tags=["recordings"])
+#: matplotlib's pyplot state is process-wide: one report is drawn at a time
+_REPORT_LOCK = threading.Lock()
 
 
 @router.get("/api/recordings/{rec_id}/report",
@@ -28,8 +31,9 @@ def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
 
     path = state.recording_path(rec_id)
     buf = io.BytesIO()
-    write_report(path, buf, format, site=state.site, calibration=state.acq.calibration,
-                 ref_path=state.path, spec=state.spec)
+    with _REPORT_LOCK:
+        write_report(path, buf, format, site=state.site, calibration=state.acq.calibration,
+                     ref_path=state.path, spec=state.spec)
     if format == "pdf":
         return Response(buf.getvalue(), media_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="{rec_id}-report.pdf"'})

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from radar_io.decoding.decoders import POSITION_COLUMNS
+from radar_io.decoding.model import POSITION_COLUMNS
 
 #: columns where NaN means "no value" (→ null in Arrow, empty in CSV, null in JSON)
 NULLABLE_COLUMNS: frozenset[str] = frozenset(
