@@ -111,12 +111,12 @@ class ServiceState:
             from radar_io.sinks.uplink import DASink
 
             self._sink_defs["da"] = DASink(cfg.da_out)
-        if cfg.asterix_out:  # interchange: ASTERIX CAT048 (sinks/asterix.py)
+        if cfg.asterix_out:  # ASTERIX CAT048 (sinks/asterix.py)
             from radar_io.sinks.asterix import service_sink
 
             self._sink_defs["asterix"] = service_sink(self, cfg.asterix_out)
         self.mqtt: Any = None
-        if cfg.publish:  # interchange: MQTT track, status and sync events (sinks/mqtt.py)
+        if cfg.publish:  # MQTT track, status and sync events (sinks/mqtt.py)
             from radar_io.sinks.mqtt import attach_to_service
 
             self.mqtt = attach_to_service(self, cfg.publish, username=cfg.mqtt_user,
