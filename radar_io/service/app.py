@@ -17,7 +17,8 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 
 from fastapi import FastAPI
-from fastapi.responses import FileResponse
+from fastapi.openapi.docs import get_swagger_ui_html
+from fastapi.responses import FileResponse, HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
 from radar_io import __version__
@@ -55,6 +56,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
             state.stop()
 
     app = FastAPI(title="radar_io", version=__version__, lifespan=lifespan,
+                  docs_url=None, redoc_url=None,  # /docs from vendored files (works offline)
                   responses=responses(403, 413, 422, 431),
                   description="Live tracking-radar data, recordings, replay and calibration. "
                   "Units: metres and degrees; field names carry their unit. Control "
@@ -67,6 +69,15 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     # the runway router declares its own token dependencies (the manual pose needs none)
     app.include_router(runway.router, responses=responses(401, 403, 429))
     app.mount("/static", StaticFiles(directory=WEB_DIR), name="static")
+
+    @app.get("/docs", include_in_schema=False)
+    def api_docs() -> HTMLResponse:
+        """Swagger UI from the package (web/vendor/swagger-ui), no CDN: works offline."""
+        return get_swagger_ui_html(
+            openapi_url="/openapi.json", title="radar_io API",
+            swagger_js_url="/static/vendor/swagger-ui/swagger-ui-bundle.js",
+            swagger_css_url="/static/vendor/swagger-ui/swagger-ui.css",
+            swagger_favicon_url="/static/vendor/swagger-ui/favicon-32x32.png")
 
     @app.get("/", include_in_schema=False)
     def index() -> FileResponse:

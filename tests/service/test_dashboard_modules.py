@@ -54,3 +54,19 @@ def test_failed_requests_show_one_formatted_line(sim_server, browser):  # noqa: 
         '/api/coordinates/runway-to-radar', {method: 'POST', body: {xr_m: [1], yr_m: [1]}})
         .then(() => 'no error', e => e.message))""")
     assert text.startswith("422: ") and "hr_m" in text and "[{" not in text
+
+
+def test_api_docs_page_renders_from_the_package_offline(sim_server, browser):  # noqa: F811
+    """/docs is Swagger UI from web/vendor (no CDN): it renders the service's operations with
+    every resource from the service itself."""
+    with urllib.request.urlopen(f"{sim_server.base}/docs", timeout=5) as r:
+        html = r.read().decode()
+    assert "/static/vendor/swagger-ui/swagger-ui-bundle.js" in html and "cdn." not in html
+    browser.watch_console()
+    browser.call("Page.enable")
+    browser.call("Page.navigate", url=sim_server.base + "/docs")
+    browser.wait_for("document.querySelectorAll('.opblock').length > 20", 20)
+    assert "radar_io" in browser.eval("document.querySelector('.info .title').textContent")
+    loaded = browser.eval("performance.getEntriesByType('resource').map(e => e.name)")
+    assert loaded and all(u.startswith(sim_server.base) or u.startswith("data:") for u in loaded)
+    assert browser.errors() == []
