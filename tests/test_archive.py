@@ -7,6 +7,7 @@ import datetime as dt
 import math
 import re
 
+import duckdb
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -18,7 +19,6 @@ from radar_io.decoding.decoders import decode_bytes
 from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.wirespec.frame import load_spec
 
-duckdb = pytest.importorskip("duckdb")
 
 PATH = ROOT / "firmware_specs" / "paths" / "demo_track_radar.toml"
 SITE = ROOT / "firmware_specs" / "sites" / "demo.toml"

@@ -17,6 +17,7 @@ import threading
 import time
 from pathlib import Path
 
+import paho.mqtt.client as paho
 import pytest
 
 from conftest import ROOT
@@ -33,7 +34,6 @@ MOSQUITTO = shutil.which("mosquitto") or ("/usr/sbin/mosquitto"
                                           if os.path.exists("/usr/sbin/mosquitto") else None)
 pytestmark = pytest.mark.skipif(MOSQUITTO is None,
                                 reason="mosquitto (Debian package mosquitto) is not installed")
-paho = pytest.importorskip("paho.mqtt.client")
 
 
 def wait_for(cond, timeout_s: float, step_s: float = 0.02) -> bool:
@@ -343,7 +343,7 @@ def test_service_wiring_publishes_what_api_track_serves(broker, tmp_path):
     import urllib.request
 
     import numpy as np
-    uvicorn = pytest.importorskip("uvicorn")
+    import uvicorn
     from radar_io.encoding.asterix_cat048 import RHO_LSB_M, THETA_LSB_DEG, decode_records
     from radar_io.service.app import build_app
     from radar_io.service.config import ServiceConfig

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import ROOT, run_cli
+from conftest import ROOT, require_program, run_cli
 
 ARTIFACTS = Path(os.environ.get("RADAR_IO_ARTIFACTS", ROOT / "artifacts"))
 DEMO_PATH = ROOT / "firmware_specs" / "paths" / "demo_track_radar.toml"
@@ -151,10 +151,7 @@ class _Chrome:
 
 
 def test_html_opens_offline_in_chromium_without_console_errors(flight, tmp_path):
-    import shutil
-
-    if not any(shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome")):
-        pytest.skip("Chromium is not installed (Debian package 'chromium')")
+    require_program("chromium", "chromium-browser", "google-chrome")
     html = _html_report(flight, tmp_path)
     ch = _Chrome(tmp_path / "profile")
     try:
@@ -221,8 +218,6 @@ def test_pdf_pages_and_figures(flight, tmp_path):
 def test_airdata_adds_the_pressure_altitude_figure(tmp_path):
     """A radar recording and an airborne CAN log of the same simulated flight: the report's
     PA − H statistics equal those of `radar-io align`, and a sixth figure appears."""
-    pytest.importorskip("can")
-    pytest.importorskip("cantools")
     from radar_io.analysis.flight_digest import digest_recording
     from radar_io.analysis.report import build_report
 

@@ -9,10 +9,10 @@ import os
 
 import pytest
 
-schemathesis = pytest.importorskip("schemathesis")
-from hypothesis import HealthCheck, settings  # noqa: E402
+import schemathesis
+from hypothesis import HealthCheck, settings
 
-from radar_io.benchmarks.service_load import ServeProcess  # noqa: E402
+from radar_io.benchmarks.service_load import ServeProcess
 
 TOKEN = "contract-token"
 EXAMPLES = int(os.environ.get("RADAR_IO_CONTRACT_EXAMPLES", "40"))

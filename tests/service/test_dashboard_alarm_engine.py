@@ -1,22 +1,13 @@
-"""The alarm banner against the service's own alarm engine (radar_io.service.alarms, from
-the report branch; skipped where that engine is not merged): a limit crossing in simulated
-data shows on the page, and the ACK button acknowledges it with the control token."""
+"""The alarm banner against the service's own alarm engine (radar_io.service.alarms): a limit
+crossing in simulated data shows on the page, and the ACK button acknowledges it with the
+control token."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
-
-import pytest
-
-from radar_io.service.config import ServiceConfig
 
 from .liveserver import TOKEN, browser, live_server, service_config  # noqa: F401
 from .test_live_pty import ARTIFACTS
-
-if "alarms" not in {f.name for f in dataclasses.fields(ServiceConfig)}:
-    pytest.skip("no alarm engine in this tree (ServiceConfig has no 'alarms')",
-                allow_module_level=True)
 
 BANNER = "document.getElementById('alarms')"
 
