@@ -85,6 +85,28 @@ def vectors() -> dict:
     return json.loads((DATA / "rdr1_vectors.json").read_text(encoding="utf-8"))
 
 
+@pytest.fixture(scope="session")
+def golden() -> dict:
+    """Inputs and main's decoder output before the decoding rework (tests/data/README.md)."""
+    import numpy as np
+
+    with np.load(DATA / "rdr1_golden.npz") as z:
+        return {k: z[k] for k in z.files}
+
+
+def assert_golden(batch, golden: dict, key: str) -> None:
+    """``batch`` has the golden ``key``'s columns (order, dtypes, values, NaN where NaN) and
+    counters exactly."""
+    import numpy as np
+
+    assert list(batch.columns) == json.loads(str(golden[f"{key}/columns"]))
+    assert batch.stats == json.loads(str(golden[f"{key}/stats"]))
+    for col in batch.columns:
+        want = golden[f"{key}/{col}"]
+        assert batch[col].dtype == want.dtype, col
+        assert np.array_equal(batch[col], want, equal_nan=want.dtype.kind == "f"), col
+
+
 def run_cli(*args: str, input: bytes | None = None, timeout: float = 300,
             env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     """Run ``radar-io`` as a separate process, the way an operator would."""

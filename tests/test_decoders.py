@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import independent
+from conftest import assert_golden
 from radar_io.decoding.decoders import DECODE_COLUMNS, BatchDecoder, FrameDecoder, decode_bytes
 from radar_io.encoding.rdr1 import FrameEncoder, encode_frames, raw_words
 from radar_io.framing.framers import BatchFramer
@@ -20,15 +20,6 @@ EXACT = ("seq", "tod_s", "sr_m", "dsr_m", "el_deg", "del_deg", "az_deg", "daz_de
          "go", "rx_good", "sync", "sr_c_m", "el_c_deg", "az_c_deg", "auto", "servo_bw", "status_raw")
 VEC_KEYS = {"sr_c": "sr_c_m", "el_c": "el_c_deg", "az_c": "az_c_deg", "x": "x_m", "y": "y_m",
             "h": "h_m"}
-
-
-DATA = Path(__file__).resolve().parent / "data"
-
-
-@pytest.fixture(scope="module")
-def vectors() -> dict:
-    """The shared RDR1 vectors, copied into tests/data (see tests/data/README.md)."""
-    return json.loads((DATA / "rdr1_vectors.json").read_text())
 
 
 def _same(got, want, tol: float = 0.0) -> bool:
@@ -189,33 +180,16 @@ def test_batch_decoder_accepts_blocks_and_set_calibration(spec):
 
 
 # ---------------------------------------------------------------- chunked decode
-GOLDEN = DATA / "rdr1_golden.npz"
-
-
-@pytest.fixture(scope="module")
-def golden():
-    with np.load(GOLDEN) as z:
-        return {k: z[k] for k in z.files}
-
-
 @pytest.mark.parametrize("block_frames", [65536, 1000, 7, 3])
 @pytest.mark.parametrize("name", ["clean", "damaged"])
 def test_decode_bytes_reproduces_the_previous_decoder_exactly(golden, name, block_frames):
     """Columns, dtypes, column order and counters as main's decoder gave them (tests/data)."""
-    import json
-
     from radar_io.decoding.biases import Calibration
 
     data = golden[f"input_{name}"].tobytes()
     for cname, cal in (("nocal", None), ("cal", Calibration(dsr_m=2.5, del_deg=-0.013, daz_deg=0.021))):
         b = decode_bytes(data, cal, block_frames=block_frames)
-        key = f"{name}/{cname}"
-        assert list(b.columns) == json.loads(str(golden[f"{key}/columns"]))
-        assert b.stats == json.loads(str(golden[f"{key}/stats"]))
-        for col in b.columns:
-            want = golden[f"{key}/{col}"]
-            assert b[col].dtype == want.dtype, col
-            assert np.array_equal(b[col], want, equal_nan=want.dtype.kind == "f"), col
+        assert_golden(b, golden, f"{name}/{cname}")
 
 
 def _per_frame(data: bytes, spec):
@@ -304,13 +278,12 @@ def test_iter_decode_takes_bytes_paths_files_and_chunk_iterables(tmp_path, golde
 
 def test_bench_measures_a_fresh_process_with_anchors_from_the_same_run():
     """`radar-io bench --json`: fresh-child figures and anchors that agree with each other."""
-    import json as _json
 
     from conftest import run_cli
 
     r = run_cli("bench", "--json", "--frames", "20000", "--repeat", "1", "--core-only")
     assert r.returncode == 0, r.stderr
-    res = _json.loads(r.stdout)
+    res = json.loads(r.stdout)
     c, d = res["clean"], res["damaged_1pct"]
     # the clean stream: every frame accepted, by the decoder and by the plain-Python reference
     assert c["frames_in"] == c["frames_accepted"] == c["reference_frames_ok"] == 20000
