@@ -13,6 +13,8 @@ import os
 import shutil
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -105,6 +107,26 @@ def assert_golden(batch, golden: dict, key: str) -> None:
         want = golden[f"{key}/{col}"]
         assert batch[col].dtype == want.dtype, col
         assert np.array_equal(batch[col], want, equal_nan=want.dtype.kind == "f"), col
+
+
+def fly_on_virtual_bus(channel: str, stop: threading.Event, duration_s: float = 60.0) -> None:
+    """The simulated aircraft's recorder traffic on python-can's virtual bus ``channel``, in
+    real time, until ``stop`` is set or ``duration_s`` has passed (run it on a thread)."""
+    import can
+
+    from radar_io.simulation.aircraft import AircraftSimulator
+    from radar_io.simulation.radar import FlightScript, SimConfig
+
+    bus = can.Bus(interface="virtual", channel=channel)
+    sim = AircraftSimulator(FlightScript(), SimConfig(sync_every_s=2.0), duration_s=duration_s)
+    t0, t = time.monotonic(), 0.0
+    while not stop.is_set() and t < duration_s - 1.0:
+        now = time.monotonic() - t0
+        if now > t:
+            sim.send(bus, t, now)
+            t = now
+        time.sleep(0.05)
+    bus.shutdown()
 
 
 def run_cli(*args: str, input: bytes | None = None, timeout: float = 300,

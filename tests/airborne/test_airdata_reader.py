@@ -7,12 +7,10 @@ import threading
 import time
 import uuid
 
-import can
 import pytest
 
+from conftest import fly_on_virtual_bus
 from radar_io.errors import ConfigError
-from radar_io.simulation.aircraft import AircraftSimulator
-from radar_io.simulation.radar import FlightScript, SimConfig
 from radar_io.sources.airdata import AirDataReader
 
 
@@ -26,21 +24,8 @@ def _until(cond, timeout_s: float = 15.0) -> None:
 def test_reader_reopens_a_failed_bus_and_samples_flow_again():
     channel = f"air-{uuid.uuid4().hex[:12]}"
     stop = threading.Event()
-
-    def aircraft() -> None:
-        bus = can.Bus(interface="virtual", channel=channel)
-        sim = AircraftSimulator(FlightScript(), SimConfig(sync_every_s=2.0), duration_s=60.0)
-        t0, t = time.monotonic(), 0.0
-        while not stop.is_set() and t < 59.0:
-            now = time.monotonic() - t0
-            if now > t:
-                sim.send(bus, t, now)
-                t = now
-            time.sleep(0.05)
-        bus.shutdown()
-
     reader = AirDataReader("virtual", channel, lambda: None)
-    ac = threading.Thread(target=aircraft, daemon=True)
+    ac = threading.Thread(target=fly_on_virtual_bus, args=(channel, stop), daemon=True)
     try:
         reader.start()
         ac.start()

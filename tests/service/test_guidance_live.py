@@ -14,15 +14,13 @@ import time
 import urllib.request
 import uuid
 
-import can
 import numpy as np
 import pytest
 import uvicorn
 
-from radar_io.simulation.aircraft import AircraftSimulator
+from conftest import fly_on_virtual_bus
 from radar_io.service.app import create_app
 from radar_io.service.config import ServiceConfig
-from radar_io.simulation.radar import FlightScript, SimConfig
 from radar_io.wirespec.frame import spec_dir
 
 from .cdp import Chrome
@@ -48,19 +46,8 @@ def live(tmp_path):
         wait_for(lambda: server.started, what="uvicorn")
         port = server.servers[0].sockets[0].getsockname()[1]  # port 0: the one the kernel gave
 
-        def aircraft() -> None:  # the aircraft's recorder traffic on the bus, in real time
-            bus = can.Bus(interface="virtual", channel=channel)
-            sim = AircraftSimulator(FlightScript(), SimConfig(sync_every_s=2.0), duration_s=60.0)
-            t0, t = time.monotonic(), 0.0
-            while not stop.is_set() and t < 59.0:
-                now = time.monotonic() - t0
-                if now > t:
-                    sim.send(bus, t, now)
-                    t = now
-                time.sleep(0.05)
-            bus.shutdown()
-
-        ac = threading.Thread(target=aircraft, daemon=True)
+        # the aircraft's recorder traffic on the bus, in real time
+        ac = threading.Thread(target=fly_on_virtual_bus, args=(channel, stop), daemon=True)
         ac.start()
         base = f"http://127.0.0.1:{port}"
 
