@@ -104,6 +104,18 @@ class ServeProcess:
             time.sleep(0.1)
         raise TimeoutError("service did not become ready")
 
+    def __enter__(self) -> "ServeProcess":
+        """Wait until it serves (stopping it when it never does)."""
+        try:
+            self.wait_ready()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
     def stop(self) -> str:
         """Terminate (kill after 10 s); the process's stderr."""
         if self.proc.poll() is None:

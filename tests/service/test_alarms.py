@@ -171,11 +171,8 @@ name = "receiver good"
                      extra=("--config", str(cfg), "--auto-record", "always"),
                      env={"RADAR_IO_TOKEN": TOKEN})
     s.data = d / "data"
-    try:
-        s.wait_ready()
+    with s:  # stopped even when it never becomes ready
         yield s
-    finally:
-        s.stop()
 
 
 def _call(svc, method, path, token=TOKEN):

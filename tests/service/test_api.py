@@ -28,11 +28,8 @@ def svc(tmp_path_factory):
     s = ServeProcess("sim://?go_delay_s=0.5&sync_every_s=1", d / "data",
                      env={"RADAR_IO_TOKEN": TOKEN})
     s.data = d / "data"
-    try:  # stopped even when it never became ready
-        s.wait_ready()
+    with s:  # stopped even when it never becomes ready
         yield s
-    finally:
-        s.stop()
 
 
 def msg(doc) -> str:

@@ -38,10 +38,9 @@ def served(tmp_path_factory):
     s = ServeProcess("sim://", d / "data", extra=("--config", str(cfg)),
                      env={"RADAR_IO_TOKEN": TOKEN})
     try:
-        s.wait_ready()
-        yield s
+        with s:  # stopped even when it never becomes ready
+            yield s
     finally:
-        s.stop()
         print(f"\nschemathesis requests: {COUNT}")
         assert sum(COUNT.values()) >= 200
 

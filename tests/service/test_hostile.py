@@ -26,11 +26,8 @@ def svc(tmp_path_factory):
                    'max_body_kb = 64\nmax_header_kb = 8\nauto_record = "manual"\n')
     s = ServeProcess("sim://", d / "data", extra=("--config", str(cfg)),
                      env={"RADAR_IO_TOKEN": TOKEN})
-    try:
-        s.wait_ready()
+    with s:  # stopped even when it never becomes ready
         yield s
-    finally:
-        s.stop()
 
 
 def request(svc, method: str, path: str, body: bytes | None = None,
