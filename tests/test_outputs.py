@@ -218,6 +218,15 @@ def test_truncated_recording_counts_and_still_writes(recording, tmp_path):
     assert pq.read_metadata(out).num_rows == st["frames"] > 0
 
 
+def _close_pipes(p: subprocess.Popen) -> None:
+    for f in (p.stdin, p.stdout, p.stderr):
+        if f is not None:
+            try:
+                f.close()
+            except BrokenPipeError:
+                pass
+
+
 def _start_slow_decode(tmp_path, fmt, first: bytes):
     out = tmp_path / f"live.{fmt}"
     p = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "decode", "-", "-o", str(out),
@@ -249,12 +258,7 @@ def test_interrupted_decode_leaves_no_output_and_keeps_the_old_file(recording, t
         if p.poll() is None:
             p.kill()
             p.wait()
-        for s in (p.stdin, p.stdout, p.stderr):
-            if s is not None:
-                try:
-                    s.close()
-                except BrokenPipeError:
-                    pass
+        _close_pipes(p)
     assert p.returncode == 130
     assert _leftovers(tmp_path, f"live.{fmt}") == [f"live.{fmt}"]
     assert out.read_bytes() == b"previous complete file"
@@ -268,12 +272,7 @@ def test_killed_decode_leaves_only_a_hidden_part_file(recording, tmp_path):
         p.kill()
         p.wait(timeout=60)
     finally:
-        for s in (p.stdin, p.stdout, p.stderr):
-            if s is not None:
-                try:
-                    s.close()
-                except BrokenPipeError:
-                    pass
+        _close_pipes(p)
     assert not out.exists()
     left = _leftovers(tmp_path, "live.parquet")
     assert left and all(n.startswith(".live.parquet.") and n.endswith(".part") for n in left)
