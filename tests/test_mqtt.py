@@ -21,6 +21,7 @@ import paho.mqtt.client as paho
 import pytest
 
 from conftest import ROOT
+from radar_io.benchmarks.service_load import end_process
 from radar_io.coordinates.transforms import load_site
 from radar_io.errors import ConfigError
 from radar_io.recording.recorder import Recorder
@@ -83,12 +84,7 @@ class Broker:
 
     def stop(self) -> None:
         if self.proc is not None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(5)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
+            end_process(self.proc, 5.0)
             self.proc = None
 
 

@@ -52,6 +52,18 @@ class Pty:
                 pass
 
 
+def end_process(proc: subprocess.Popen, timeout_s: float = 10.0) -> None:
+    """Terminate ``proc`` and wait; kill it if it has not ended after ``timeout_s``."""
+    if proc.poll() is not None:
+        return
+    proc.terminate()
+    try:
+        proc.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
 class ServeProcess:
     """``radar-io serve`` in a child process on 127.0.0.1, on a port the kernel picks
     (``--port 0``; the real port is read from the ``listening on`` line)."""
@@ -118,13 +130,7 @@ class ServeProcess:
 
     def stop(self) -> str:
         """Terminate (kill after 10 s); the process's stderr."""
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        end_process(self.proc)
         self._drain.join(5)
         return "".join(self.stderr_lines)
 

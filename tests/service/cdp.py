@@ -13,6 +13,8 @@ from typing import Any
 
 from websockets.sync.client import connect
 
+from radar_io.benchmarks.service_load import end_process
+
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-quic", "--remote-debugging-port=0", "--window-size=1200,900"]
@@ -119,9 +121,4 @@ class Chrome:
             self._stop_process()
 
     def _stop_process(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+        end_process(self.proc)
