@@ -85,6 +85,20 @@ def read_json(path: str | os.PathLike[str], what: str,
         raise error(f"{what} {p} is not valid JSON: {exc.msg} (line {exc.lineno})") from exc
 
 
+def json_safe(x: Any) -> Any:
+    """``x`` as plain JSON types for writing: numpy arrays and scalars as Python values,
+    mapping keys as strings, NaN and ±inf as null."""
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if hasattr(x, "tolist"):
+        return json_safe(x.tolist())
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    return x
+
+
 def _no_constant(name: str) -> Any:
     raise ValueError(f"{name} is not allowed (JSON has no NaN or Infinity)")
 

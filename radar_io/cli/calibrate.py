@@ -15,6 +15,7 @@ from typing import Any
 from radar_io.cli.argtypes import finite_float as _finite_float
 from radar_io.cli.argtypes import positive_float as _positive_float
 from radar_io.errors import CalibrationInputError
+from radar_io.textfiles import json_safe
 
 
 # ----------------------------------------------------------------- argument types
@@ -46,21 +47,8 @@ def _int_at_least(low: int):
 
 
 # ----------------------------------------------------------------- output
-def _jsonable(x: Any) -> Any:
-    """Plain JSON types; NaN/inf become null."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if hasattr(x, "tolist"):
-        return _jsonable(x.tolist())
-    if isinstance(x, float):
-        return x if math.isfinite(x) else None
-    return x
-
-
 def _emit(doc: dict[str, Any]) -> int:
-    sys.stdout.write(json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n")
+    sys.stdout.write(json.dumps(json_safe(doc), indent=2, allow_nan=False) + "\n")
     return 0
 
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import logging
-import math
 import os
 import threading
 import time
@@ -37,6 +36,7 @@ import numpy as np
 
 from radar_io.errors import ConfigError, UplinkError
 from radar_io.sinks.base import Batch, Sink
+from radar_io.textfiles import json_safe
 
 log = logging.getLogger("radar_io.sinks.mqtt")
 
@@ -95,16 +95,7 @@ def parse_mqtt_url(url: str) -> MqttTarget:
 
 def _json(doc: Any) -> str:
     """Strict JSON (non-finite floats → null)."""
-    def clean(v: Any) -> Any:
-        if isinstance(v, float) and not math.isfinite(v):
-            return None
-        if isinstance(v, dict):
-            return {k: clean(x) for k, x in v.items()}
-        if isinstance(v, (list, tuple)):
-            return [clean(x) for x in v]
-        return v
-
-    return json.dumps(clean(doc), separators=(",", ":"), default=str)
+    return json.dumps(json_safe(doc), separators=(",", ":"), default=str)
 
 
 class MqttPublisher:

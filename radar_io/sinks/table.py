@@ -155,11 +155,3 @@ def _empty_batch() -> Any:
     dec = BatchDecoder()
     return dec.batch(np.empty((0, dec.spec.length // 2), np.uint16), {})
 
-
-def jsonable(v: Any) -> Any:
-    """A JSON-safe value: NaN → None, numpy scalars → Python."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float) and v != v:
-        return None
-    return v
