@@ -93,3 +93,22 @@ def test_the_back_off_grows_while_writes_keep_failing():
         assert 2 <= sink.opens <= 6, sink.opens
     finally:
         w.close()
+
+
+def test_fan_out_builds_the_columns_once_and_every_worker_gets_them(monkeypatch):
+    from radar_io.sinks import worker as worker_mod
+
+    calls = []
+    real = worker_mod.message_columns
+    monkeypatch.setattr(worker_mod, "message_columns", lambda msgs: calls.append(1) or real(msgs))
+    sinks = [ListSink({}), ListSink({})]
+    workers = [SinkWorker(f"w{i}", s) for i, s in enumerate(sinks)]
+    try:
+        submit = worker_mod.fan_out(workers)
+        submit([{"seq": 1, "sr_m": 1.0}, {"seq": 2, "sr_m": None}])
+        submit([{"seq": 3, "sr_m": 3.0}])
+        _wait(lambda: all(s.rows == [1, 2, 3] for s in sinks))
+        assert len(calls) == 2  # once per read, not once per worker
+    finally:
+        for w in workers:
+            w.close()

@@ -130,13 +130,13 @@ class ServiceState:
     # -- lifespan ---------------------------------------------------------------------------
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         """Start the workers: sinks (they open and reopen their targets), air data, reader."""
-        from radar_io.sinks.worker import SinkWorker
+        from radar_io.sinks.worker import SinkWorker, fan_out
 
         self.hub.attach(loop)
         for name, sink in self._sink_defs.items():
-            w = SinkWorker(name, sink)
-            self.sinks[name] = w
-            self.acq.processors.append(w.submit)
+            self.sinks[name] = SinkWorker(name, sink)
+        if self.sinks:  # the columns are built once per read for every sink
+            self.acq.processors.append(fan_out(list(self.sinks.values())))
         if self.air is not None:
             self.air.start()
         if self.mqtt is not None:

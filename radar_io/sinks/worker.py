@@ -51,12 +51,15 @@ class SinkWorker:
 
     def submit(self, msgs: list[dict[str, Any]]) -> None:
         """Snapshot the messages' columns (on the caller's thread) and queue them."""
-        if not msgs:
-            return
+        if msgs:
+            self.submit_columns(message_columns(msgs))
+
+    def submit_columns(self, cols: dict[str, np.ndarray]) -> None:
+        """Queue a batch of columns (shared with other workers: sinks only read them)."""
         try:
-            self.q.put_nowait(message_columns(msgs))
+            self.q.put_nowait(dict(cols))
         except queue.Full:
-            self.dropped_samples += len(msgs)
+            self.dropped_samples += len(next(iter(cols.values()), ()))
 
     def _fail(self, exc: BaseException) -> None:
         self.errors += 1
@@ -129,3 +132,14 @@ class SinkWorker:
         except queue.Full:
             pass
         self._thread.join(5)
+
+
+def fan_out(workers: list[SinkWorker]) -> Any:
+    """One acquisition processor for all ``workers``: the messages' columns are built once
+    per read (on the reader thread) and queued to each worker."""
+    def submit(msgs: list[dict[str, Any]]) -> None:
+        if msgs and workers:
+            cols = message_columns(msgs)
+            for w in workers:
+                w.submit_columns(cols)
+    return submit
