@@ -275,3 +275,44 @@ def test_file_size_limit_in_a_subprocess(tmp_path):
     assert p.stat().st_size <= 50_000
     with RecordingReader(p) as r:
         assert len(list(r)) == int(n) and r.report.torn_tail_bytes == 0
+
+
+def test_version_2_keeps_both_clocks_and_version_1_still_reads(tmp_path, spec):
+    """v2 chunks carry the monotonic receive time beside the wall clock; a v1 file (no
+    monotonic time) reads with mono_ns = t_ns; a damaged v1 chunk is skipped like a v2 one."""
+    import json
+    import struct
+    import zlib
+
+    from radar_io.recording import rdrlog
+
+    p2 = tmp_path / "v2.rdrlog"
+    with RecordingWriter(p2, spec) as w:
+        for i in range(5):  # the wall clock steps back an hour after chunk 2
+            w.write(payload(i), t_ns=10**18 + i * 10**6 - (3600 * 10**9 if i > 2 else 0),
+                    mono_ns=5 * 10**9 + i * 10**6)
+    with RecordingReader(p2) as r:
+        assert r.version == 2 and r.header["format"] == "rdrlog/2"
+        chunks = list(r)
+    assert [c.mono_ns for c in chunks] == [5 * 10**9 + i * 10**6 for i in range(5)]
+    steps = [rdrlog.clock_step_s(a.t_ns, a.mono_ns, b.t_ns, b.mono_ns)
+             for a, b in zip(chunks, chunks[1:])]
+    assert steps == [0.0, 0.0, -3600.0, 0.0]
+
+    p1 = tmp_path / "v1.rdrlog"
+    hdr = json.dumps({"format": "rdrlog/1"}).encode()
+    body = [rdrlog.encode_chunk_v1(payload(i), 1000 * i) for i in range(4)]
+    damaged = bytearray(body[1])
+    damaged[-1] ^= 0xFF
+    body[1] = bytes(damaged)
+    p1.write_bytes(rdrlog.FILE_MAGIC_V1 + struct.pack(">I", len(hdr)) + hdr
+                   + struct.pack(">I", zlib.crc32(hdr)) + b"".join(body))
+    assert is_recording(p1)
+    with RecordingReader(p1) as r:
+        got = list(r)
+        assert r.version == 1 and r.report.corrupt_chunks == 1
+    assert [c.data for c in got] == [payload(0), payload(2), payload(3)]
+    assert [c.mono_ns for c in got] == [c.t_ns for c in got] == [0, 2000, 3000]
+    with open(p1, "rb") as f:  # the payload sits right after the v1 chunk header
+        f.seek(got[1].offset + got[1].head_size)
+        assert f.read(len(payload(2))) == payload(2)

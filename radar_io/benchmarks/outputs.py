@@ -100,12 +100,12 @@ def repeat_recording(src: Path, dst: Path, times: int) -> None:
     from radar_io.wirespec.frame import load_spec
 
     with RecordingReader(src) as r:
-        chunks = [(c.t_ns, c.data) for c in r]
-    span = chunks[-1][0] - chunks[0][0] + 1
+        chunks = [(c.t_ns, c.mono_ns, c.data) for c in r]
+    span = chunks[-1][1] - chunks[0][1] + 1
     RecordingWriter(dst, load_spec(), fsync_interval_s=3600).close()  # header only
     with open(dst, "ab") as f:
         for k in range(times):
-            f.write(b"".join(encode_chunk(d, t + k * span) for t, d in chunks))
+            f.write(b"".join(encode_chunk(d, t + k * span, m + k * span) for t, m, d in chunks))
 
 
 def run(hours: float = 1.0, long_hours: float = 10.0, repeat: int = 2,

@@ -1,17 +1,27 @@
 """``.rdrlog`` recordings: the raw received bytes, append-only and crash-safe.
 
-File layout (all integers big-endian)::
+File layout, format version 2 (all integers big-endian)::
 
-    file header   magic   8 bytes  b"RDRLOG\\x00\\x01"   (format version 1)
+    file header   magic   8 bytes  b"RDRLOG\\x00\\x02"
                   hlen    u32      length of the JSON header
-                  header  hlen     UTF-8 JSON: format, spec_version, spec_sha256,
+                  header  hlen     UTF-8 JSON: format ("rdrlog/2"), spec_version, spec_sha256,
                                    site, source, created_utc, software, clock
                   hcrc    u32      zlib.crc32 of the JSON header
-    chunk …       magic   4 bytes  b"CHK1"
-                  t_ns    u64      receive time, ns since the Unix epoch (UTC)
+    chunk …       magic   4 bytes  b"CHK2"
+                  t_ns    u64      receive time, ns since the Unix epoch (UTC): a label
+                  mono_ns u64      receive time on the monotonic clock (CLOCK_MONOTONIC, ns):
+                                   what every duration, pacing and seek is measured on
                   length  u32      payload length (at most 16 MiB)
-                  crc     u32      zlib.crc32 of t_ns|length|payload (12 + length bytes)
+                  crc     u32      zlib.crc32 of t_ns|mono_ns|length|payload (20 + length bytes)
                   payload length   the bytes exactly as received
+
+Version 1 (magic ``RDRLOG\\x00\\x01``, format ``rdrlog/1``) has chunks ``CHK1 | t_ns |
+length | crc`` (crc over ``t_ns|length|payload``) and no monotonic time; the reader keeps
+reading it and gives its chunks ``mono_ns = t_ns``. The writer writes version 2 only.
+
+The two clocks: a wall-clock step (NTP, an operator setting the date) moves ``t_ns`` but not
+``mono_ns``; the difference of their deltas between two chunks is the step
+(:func:`clock_step_s`).
 
 Each chunk is handed to the kernel in one ``write`` on an ``O_APPEND`` file, so
 a ``kill -9`` of the writer loses nothing it had written; ``fsync`` runs every
@@ -47,11 +57,16 @@ from radar_io.coordinates.transforms import Site
 from radar_io.wirespec.frame import FrameSpec
 from radar_io.textfiles import open_input
 
-FILE_MAGIC = b"RDRLOG\x00\x01"
-CHUNK_MAGIC = b"CHK1"
-_CHUNK_HEAD = struct.Struct(">4sQII")  # magic, t_ns, length, crc
+FILE_MAGIC = b"RDRLOG\x00\x02"
+CHUNK_MAGIC = b"CHK2"
+_CHUNK_HEAD = struct.Struct(">4sQQII")  # magic, t_ns, mono_ns, length, crc
+FORMAT = "rdrlog/2"
+#: version 1 (read only): no monotonic time
+FILE_MAGIC_V1 = b"RDRLOG\x00\x01"
+CHUNK_MAGIC_V1 = b"CHK1"
+_CHUNK_HEAD_V1 = struct.Struct(">4sQII")  # magic, t_ns, length, crc
+FORMAT_V1 = "rdrlog/1"
 MAX_CHUNK = 16 << 20
-FORMAT = "rdrlog/1"
 
 log = logging.getLogger("radar_io.recording")
 
@@ -65,21 +80,39 @@ def storage_error(what: str, path: str | os.PathLike[str], exc: OSError) -> Stor
 
 
 def is_recording(path: str | os.PathLike[str]) -> bool:
-    """True if the file starts with the ``.rdrlog`` magic."""
+    """True if the file starts with an ``.rdrlog`` magic (either version)."""
     try:
         with open(path, "rb") as f:
-            return f.read(len(FILE_MAGIC)) == FILE_MAGIC
+            return f.read(len(FILE_MAGIC)) in (FILE_MAGIC, FILE_MAGIC_V1)
     except OSError:
         return False
 
 
-def _chunk_crc(t_ns: int, payload: bytes | memoryview) -> int:
+def _chunk_crc(t_ns: int, mono_ns: int, payload: bytes | memoryview) -> int:
+    return zlib.crc32(payload, zlib.crc32(struct.pack(">QQI", t_ns, mono_ns, len(payload))))
+
+
+def _chunk_crc_v1(t_ns: int, payload: bytes | memoryview) -> int:
     return zlib.crc32(payload, zlib.crc32(struct.pack(">QI", t_ns, len(payload))))
 
 
-def encode_chunk(payload: bytes, t_ns: int) -> bytes:
-    """The bytes of one chunk (header + payload)."""
-    return _CHUNK_HEAD.pack(CHUNK_MAGIC, t_ns, len(payload), _chunk_crc(t_ns, payload)) + payload
+def encode_chunk(payload: bytes, t_ns: int, mono_ns: int | None = None) -> bytes:
+    """The bytes of one version-2 chunk (header + payload); ``mono_ns`` defaults to ``t_ns``."""
+    mono = t_ns if mono_ns is None else mono_ns
+    return _CHUNK_HEAD.pack(CHUNK_MAGIC, t_ns, mono, len(payload),
+                            _chunk_crc(t_ns, mono, payload)) + payload
+
+
+def encode_chunk_v1(payload: bytes, t_ns: int) -> bytes:
+    """The bytes of one version-1 chunk (for tests and tools that make old files)."""
+    return _CHUNK_HEAD_V1.pack(CHUNK_MAGIC_V1, t_ns, len(payload),
+                               _chunk_crc_v1(t_ns, payload)) + payload
+
+
+def clock_step_s(prev_t_ns: int, prev_mono_ns: int, t_ns: int, mono_ns: int) -> float:
+    """Wall-clock step between two chunks, s: how much more the wall clock moved than the
+    monotonic clock (positive = set forward)."""
+    return ((t_ns - prev_t_ns) - (mono_ns - prev_mono_ns)) / 1e9
 
 
 class RecordingWriter:
@@ -99,7 +132,8 @@ class RecordingWriter:
             "source": source,
             "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "software": f"radar_io {__version__}",
-            "clock": "t_ns: receive time, ns since the Unix epoch (CLOCK_REALTIME)",
+            "clock": "t_ns: receive time, ns since the Unix epoch (CLOCK_REALTIME), a label; "
+                     "mono_ns: receive time on CLOCK_MONOTONIC, for durations",
             **(extra or {}),
         }
         try:
@@ -149,18 +183,20 @@ class RecordingWriter:
                 raise OSError(_errno.ENOSPC, os.strerror(_errno.ENOSPC))
             view = view[n:]
 
-    def write(self, payload: bytes, t_ns: int | None = None) -> None:
-        """Append one chunk of received bytes with its receive time (default: now)."""
+    def write(self, payload: bytes, t_ns: int | None = None, mono_ns: int | None = None) -> None:
+        """Append one chunk of received bytes with its receive time on both clocks
+        (default: now; ``mono_ns`` given alone is paired with the wall clock now)."""
         if self._fd < 0:
             raise RecordingError(f"recording {self.path} is closed")
         if len(payload) > MAX_CHUNK:
             for k in range(0, len(payload), MAX_CHUNK):
-                self.write(payload[k:k + MAX_CHUNK], t_ns)
+                self.write(payload[k:k + MAX_CHUNK], t_ns, mono_ns)
             return
         if self.fsync_error is not None:
             raise self.fsync_error
-        t = time.time_ns() if t_ns is None else t_ns
-        chunk = encode_chunk(bytes(payload), t)
+        t = time.time_ns() if t_ns is None else t_ns  # a label only
+        mono = (time.monotonic_ns() if t_ns is None else t_ns) if mono_ns is None else mono_ns
+        chunk = encode_chunk(bytes(payload), t, mono)
         try:
             self._write(chunk)
         except OSError as exc:
@@ -203,11 +239,15 @@ class RecordingWriter:
 
 @dataclass
 class Chunk:
-    """One recorded chunk: receive time (ns since the epoch), payload, file offset."""
+    """One recorded chunk: receive time (ns since the epoch), payload, file offset of its
+    header, monotonic receive time (ns; = ``t_ns`` in a version-1 file) and the size of its
+    header (the payload starts at ``offset + head_size``)."""
 
     t_ns: int
     data: bytes
     offset: int
+    mono_ns: int = 0
+    head_size: int = _CHUNK_HEAD.size
 
 
 @dataclass
@@ -229,14 +269,19 @@ class RecordingReader:
         self.path = Path(path)
         self._f: BinaryIO = open_input(self.path, "recording", RecordingError)
         self.size = os.fstat(self._f.fileno()).st_size
+        self.version = 2
         self.header = self._read_header()
         self.data_offset = self._f.tell()
+        self._head = _CHUNK_HEAD if self.version == 2 else _CHUNK_HEAD_V1
+        self._magic = CHUNK_MAGIC if self.version == 2 else CHUNK_MAGIC_V1
         self.report = ReadReport()
 
     def _read_header(self) -> dict[str, Any]:
         f = self._f
-        if f.read(len(FILE_MAGIC)) != FILE_MAGIC:
+        magic = f.read(len(FILE_MAGIC))
+        if magic not in (FILE_MAGIC, FILE_MAGIC_V1):
             raise RecordingError(f"{self.path} is not an .rdrlog recording (bad magic)")
+        self.version = 2 if magic == FILE_MAGIC else 1
         raw = f.read(4)
         if len(raw) < 4:
             raise RecordingError(f"{self.path}: header truncated")
@@ -252,7 +297,7 @@ class RecordingReader:
             raise RecordingError(f"{self.path}: header is not valid JSON") from exc
         if not isinstance(doc, dict):
             raise RecordingError(f"{self.path}: header is not a JSON object")
-        if doc.get("format") != FORMAT:
+        if doc.get("format") != (FORMAT if self.version == 2 else FORMAT_V1):
             raise RecordingError(f"{self.path}: unsupported recording format {doc.get('format')!r}")
         return doc
 
@@ -265,25 +310,41 @@ class RecordingReader:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    def _unpack(self, head: bytes) -> tuple[bytes, int, int, int, int]:
+        """magic, t_ns, mono_ns, length, crc of a chunk header of this file's version."""
+        if self.version == 2:
+            return _CHUNK_HEAD.unpack(head)  # type: ignore[no-any-return]
+        magic, t_ns, length, crc = _CHUNK_HEAD_V1.unpack(head)
+        return magic, t_ns, t_ns, length, crc
+
+    def _crc(self, t_ns: int, mono_ns: int, payload: bytes) -> int:
+        return _chunk_crc(t_ns, mono_ns, payload) if self.version == 2 \
+            else _chunk_crc_v1(t_ns, payload)
+
+    @property
+    def chunk_head_size(self) -> int:
+        """Bytes of a chunk header in this file (the payload follows it)."""
+        return self._head.size
+
     def __iter__(self) -> Iterator[Chunk]:
         """Good chunks in file order, from the start; see :attr:`report` afterwards."""
         self.report = rep = ReadReport()
         f = self._f
         f.seek(self.data_offset)
         off = self.data_offset
-        hsize = _CHUNK_HEAD.size
+        hsize = self._head.size
         while True:
             head = f.read(hsize)
             if not head:
                 return
             if len(head) == hsize:
-                magic, t_ns, length, crc = _CHUNK_HEAD.unpack(head)
-                if magic == CHUNK_MAGIC and length <= MAX_CHUNK:
+                magic, t_ns, mono_ns, length, crc = self._unpack(head)
+                if magic == self._magic and length <= MAX_CHUNK:
                     payload = f.read(length)
-                    if len(payload) == length and _chunk_crc(t_ns, payload) == crc:
+                    if len(payload) == length and self._crc(t_ns, mono_ns, payload) == crc:
                         rep.chunks += 1
                         rep.bytes += length
-                        yield Chunk(t_ns, payload, off)
+                        yield Chunk(t_ns, payload, off, mono_ns, hsize)
                         off += hsize + length
                         continue
             elif off + len(head) >= self.size:
@@ -312,25 +373,25 @@ class RecordingReader:
         while pos < self.size:
             f.seek(pos)
             buf = f.read(window + 3)
-            i = buf.find(CHUNK_MAGIC)
+            i = buf.find(self._magic)
             while i >= 0:
                 if self._valid_at(pos + i):
                     return pos + i
-                i = buf.find(CHUNK_MAGIC, i + 1)
+                i = buf.find(self._magic, i + 1)
             pos += window
         return None
 
     def _valid_at(self, off: int) -> bool:
         f = self._f
         f.seek(off)
-        head = f.read(_CHUNK_HEAD.size)
-        if len(head) < _CHUNK_HEAD.size:
+        head = f.read(self._head.size)
+        if len(head) < self._head.size:
             return False
-        magic, t_ns, length, crc = _CHUNK_HEAD.unpack(head)
-        if magic != CHUNK_MAGIC or length > MAX_CHUNK:
+        magic, t_ns, mono_ns, length, crc = self._unpack(head)
+        if magic != self._magic or length > MAX_CHUNK:
             return False
         payload = f.read(length)
-        return len(payload) == length and _chunk_crc(t_ns, payload) == crc
+        return len(payload) == length and self._crc(t_ns, mono_ns, payload) == crc
 
 
 def iter_prefix(path: str | os.PathLike[str], size: int, piece: int = 1 << 20) -> Iterator[bytes]:

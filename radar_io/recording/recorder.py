@@ -73,7 +73,7 @@ class Recorder:
         self.preroll_s = preroll_s
         self.retry_s = retry_s
         self.low_space_bytes = low_space_bytes
-        self._pre: deque[tuple[int, bytes]] = deque()
+        self._pre: deque[tuple[int, int, bytes]] = deque()  # (t_ns, mono_ns, data)
         self._pre_bytes = 0
         self._writer: RecordingWriter | None = None
         self._lock = threading.Lock()
@@ -93,8 +93,12 @@ class Recorder:
             self._retry = True  # opened by the first chunk: no file before data flows
 
     # -- called by the reader thread ---------------------------------------------------------
-    def on_chunk(self, data: bytes, t_ns: int) -> None:
+    def on_chunk(self, data: bytes, t_ns: int, mono_ns: int | None = None) -> None:
         """Keep the chunk in the pre-roll and append it to the open recording.
+
+        ``t_ns``: wall-clock receive time (a label); ``mono_ns``: monotonic receive time
+        (default ``t_ns``), on which the pre-roll is measured, so a wall-clock step can
+        neither grow nor shrink it.
 
         Never raises: a failing disk closes the recording (``last_error``, logged) and the
         caller carries on decoding; an automatic mode retries every ``retry_s``.
@@ -102,15 +106,16 @@ class Recorder:
         with self._lock:
             if not self.enabled:
                 return
-            self._pre.append((t_ns, data))
+            mono = t_ns if mono_ns is None else mono_ns
+            self._pre.append((t_ns, mono, data))
             self._pre_bytes += len(data)
             keep = len(data) + self.spec.length  # the frame in progress may start earlier
-            while (len(self._pre) > 1 and t_ns - self._pre[0][0] > self.preroll_s * 1e9
-                   and self._pre_bytes - len(self._pre[0][1]) >= keep):
-                self._pre_bytes -= len(self._pre.popleft()[1])
+            while (len(self._pre) > 1 and mono - self._pre[0][1] > self.preroll_s * 1e9
+                   and self._pre_bytes - len(self._pre[0][2]) >= keep):
+                self._pre_bytes -= len(self._pre.popleft()[2])
             if self._writer is not None:
                 try:
-                    self._writer.write(data, t_ns)
+                    self._writer.write(data, t_ns, mono)
                 except RadarIOError as exc:
                     self._fail(exc)
                 return
@@ -198,8 +203,8 @@ class Recorder:
                     self._note(exc)
                     raise
                 try:
-                    for t, d in self._pre:
-                        writer.write(d, t)
+                    for t, mono, d in self._pre:
+                        writer.write(d, t, mono)
                 except RadarIOError as exc:  # no room for the pre-roll: do not keep a stub
                     try:
                         writer.close()

@@ -125,7 +125,7 @@ class Acquisition:
                 self._resync()  # replay seek: these bytes do not follow the previous ones
             if data:
                 try:
-                    self._process(data, time.time_ns())
+                    self._process(data, time.time_ns(), time.monotonic_ns())
                 except Exception:  # noqa: BLE001 - a bug downstream must not stop acquisition
                     self.processing_errors += 1
                     log.exception("processing a chunk failed")
@@ -165,9 +165,9 @@ class Acquisition:
         else:
             self.recorder.enabled = False
 
-    def _process(self, data: bytes, t_ns: int) -> None:
+    def _process(self, data: bytes, t_ns: int, mono_ns: int | None = None) -> None:
         try:
-            self.recorder.on_chunk(data, t_ns)  # raw first: nothing received is lost
+            self.recorder.on_chunk(data, t_ns, mono_ns)  # raw first: nothing received is lost
         except RecordingError as exc:  # reported on the status; decoding goes on
             log.error("recording failed: %s", exc)
         frames = self.framer.feed(data)

@@ -1,6 +1,8 @@
 """``replay://PATH.rdrlog?speed=1.0``: a recording played back as a byte source.
 
-Paced by the recorded receive timestamps (``speed`` multiplies the pace, ``0`` = as
+Paced by the recorded monotonic receive times (``mono_ns``; a version-1 file has only the
+wall-clock ``t_ns``, used in its place), so a wall-clock step during the recording neither
+stalls the replay nor moves a seek (``speed`` multiplies the pace, ``0`` = as
 fast as possible), with pause, resume, seek, step and speed for the service's replay
 controls. The same class serves ``radar-io serve --source replay://…`` and the
 dashboard's replay panel."""
@@ -36,14 +38,15 @@ class ReplaySource:
         self.url = f"replay://{self.path.name}?speed={speed:g}"
         with RecordingReader(self.path) as r:
             self.header = r.header
-            self._index = [(c.offset, c.t_ns, len(c.data)) for c in r]
+            # (payload offset, monotonic receive time, length, wall-clock receive time)
+            self._index = [(c.offset + c.head_size, c.mono_ns, len(c.data), c.t_ns) for c in r]
             self.report = r.report
         self._lock = threading.Lock()
         self.speed = speed
         self.paused = False
         self._steps = 0
         self._i = 0
-        self._anchor: tuple[float, int] | None = None  # (monotonic, t_ns) pacing reference
+        self._anchor: tuple[float, int] | None = None  # (monotonic now, recorded mono_ns)
         self._f: Any = None
         self._jumped = False        #: a seek happened since the last delivered chunk
         self.discontinuous = False  #: the last read()'s bytes do not follow the previous read's
@@ -143,9 +146,9 @@ class ReplaySource:
         if entry is None or wait > 0:
             time.sleep(min(max(wait, 0.0), timeout_s))
             return b""
-        off, _, length = entry
+        off, _, length, _ = entry
         try:
-            self._f.seek(off + 20)  # chunk header: magic, t_ns, length, crc
+            self._f.seek(off)
             data = self._f.read(length)
         except OSError as exc:
             raise SourceError(f"reading recording {self.path.name}: {exc.strerror}") from exc
