@@ -25,7 +25,7 @@ from radar_io.benchmarks.service_load import end_process
 from radar_io.coordinates.transforms import load_site
 from radar_io.errors import ConfigError
 from radar_io.recording.recorder import Recorder
-from radar_io.service.acquisition import Acquisition
+from radar_io.service.pipeline import Pipeline as ServicePipeline
 from radar_io.service.history import History
 from radar_io.sinks import open_sink
 from radar_io.sinks.mqtt import MqttPublisher, parse_mqtt_url
@@ -151,8 +151,8 @@ class Pipeline:
         self.submits = 0
         self.pub = MqttPublisher(url, status=self.status,
                                  sync_events=lambda: self.recorder.sync_events)
-        self.acq = Acquisition("sim://?rate_hz=1000&sync_every_s=1&seed=3", spec,
-                               self.recorder, self.history, self.publish, site=site)
+        self.acq = ServicePipeline("sim://?rate_hz=1000&sync_every_s=1&seed=3", spec,
+                                   self.history, self.publish, recorder=self.recorder, site=site)
 
     def publish(self, items) -> None:      # what Service wires: hub + MQTT
         t0 = time.perf_counter()
