@@ -16,7 +16,7 @@ import independent
 from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
 from radar_io.wirespec.frame import load_spec
 
-from .liveserver import TOKEN, live_server, service_config
+from .liveserver import TOKEN, browser, live_server, service_config  # noqa: F401
 from .test_live_pty import wait_for
 
 GO, GO_SYNC = 0x0005, 0x8005
@@ -189,3 +189,28 @@ def test_the_old_replay_routes_are_gone_and_say_where_to(server, method, path, n
     code, doc = server.request(method, path, {"recording": "x"} if method == "POST" else None,
                                TOKEN)
     assert code == 410 and new in doc["detail"][0]["msg"] and doc["detail"][0]["type"] == "gone"
+
+
+def test_dashboard_replay_panel_uses_a_session_and_returns_to_live(server, browser):
+    """Headless Chromium: Replay opens a session and the views follow /ws/replays/{id};
+    "Back to live" deletes it and the views follow /ws/live again."""
+    write_flight(server.rec_dir / "panel.rdrlog", 20000, seq0=40000, sr=15000)
+    browser.navigate(server.base + "/")
+    browser.wait_for("window.radarReady && radarState.received > 10")
+    browser.eval(f"document.getElementById('token').value = {json.dumps(TOKEN)}, true")
+    browser.wait_for("[...document.getElementById('rec-list').options].some(o => o.value === 'panel')")
+    browser.eval("document.getElementById('rec-list').value = 'panel', true")
+    browser.eval("document.getElementById('replay').click(), true")
+    browser.wait_for("radarState.replay !== null && radarState.last && radarState.last.replay", 20)
+    sid = browser.eval("radarState.replay.id")
+    assert [r["id"] for r in server.get("/api/replays")] == [sid]
+    assert browser.eval("radarState.last.replay") == sid and browser.eval("radarState.last.seq") >= 40000
+    browser.wait_for("document.getElementById('mode').textContent === 'REPLAY'")
+    browser.wait_for("document.getElementById('replay-state').textContent.startsWith('panel:')")
+    browser.eval("document.getElementById('pause').click(), true")
+    wait_for(lambda: server.get(f"/api/replays/{sid}")["paused"], what="paused from the panel")
+    browser.eval("document.getElementById('live').click(), true")
+    wait_for(lambda: server.get("/api/replays") == [], what="the session deleted")
+    browser.wait_for("radarState.replay === null && radarState.last && !('replay' in radarState.last)"
+                     " && radarState.last.seq < 40000", 20)
+    assert server.get("/api/status")["connected"]
