@@ -24,12 +24,12 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
+import independent
 import numpy as np
 import pytest
 import websockets
-
-import independent
 from conftest import require_program
+
 from radar_io.benchmarks.service_load import Pty, ServeProcess
 from radar_io.decoding.decoders import decode_bytes
 from radar_io.recording.rdrlog import RecordingReader
@@ -119,7 +119,7 @@ class WsCollector(threading.Thread):
             while not self.halt.is_set():
                 try:
                     doc = json.loads(await asyncio.wait_for(ws.recv(), 0.2))
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     continue
                 except websockets.ConnectionClosed:
                     return
@@ -347,11 +347,12 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
 
     require_program("mosquitto", "/usr/sbin/mosquitto")
     require_program("tshark")
+    from test_asterix import tshark_fields, write_pcap
+    from test_mqtt import Broker, Subscriber
+
     from radar_io.coordinates.transforms import load_site
     from radar_io.encoding.asterix_cat048 import decode_records
     from radar_io.encoding.tlm1 import TelemetryDecoder
-    from test_asterix import tshark_fields, write_pcap
-    from test_mqtt import Broker, Subscriber
 
     run_s = 20.0
     rec_dir = tmp_path / "data" / "recordings"
@@ -370,7 +371,7 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
         while not udp_halt.is_set():
             try:
                 grams.append(udp.recv(65535))
-            except socket.timeout:
+            except TimeoutError:
                 continue
 
     udp_thread = threading.Thread(target=receive, daemon=True)
@@ -469,13 +470,13 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
     seq_b = [m["seq"] for m in msgs_b]
     cut = next((k for k in range(1, len(seq_b)) if seq_b[k] != seq_b[k - 1] + 1), len(seq_b))
     figures = {
-        "run_s": run_s, "live_frames_sent": sent, "recording_frames": int(len(seqs)),
+        "run_s": run_s, "live_frames_sent": sent, "recording_frames": len(seqs),
         "recording_missing_by_seq": missing, "recording_seq_gaps": seq_gaps(seqs),
         "status_polls": len(seen), "status_polls_connected_same_source": sum(
             c and s == source and n == 0 for c, s, n, _ in seen),
-        "tlm1_frames": int(len(tlm_xr)), "tlm1_replayed": tlm_replayed,
-        "asterix_records": int(len(ast["sr_m"])), "asterix_replayed": ast_replayed,
-        "asterix_records_tshark": int(len(shark["asterix.048_020_SIM"])),
+        "tlm1_frames": len(tlm_xr), "tlm1_replayed": tlm_replayed,
+        "asterix_records": len(ast["sr_m"]), "asterix_replayed": ast_replayed,
+        "asterix_records_tshark": len(shark["asterix.048_020_SIM"]),
         "mqtt_track": len(mqtt_track), "mqtt_replayed": mqtt_replayed,
         "ws_live": len(live_msgs), "ws_live_replayed": ws_replayed,
         "sync_events_live": len(sync_events), "sync_events_replayed": sync_replayed,

@@ -9,14 +9,14 @@ import time
 import urllib.request
 from pathlib import Path
 
+import independent
 import pytest
 import websockets
 
-import independent
 from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
 from radar_io.wirespec.frame import load_spec
 
-from .liveserver import TOKEN, browser, live_server, service_config  # noqa: F401
+from .liveserver import TOKEN, browser, live_server, service_config  # noqa: F401 - fixture
 from .test_live_pty import wait_for
 
 GO, GO_SYNC = 0x0005, 0x8005
@@ -54,7 +54,7 @@ async def collect(url: str, until, timeout_s: float = 30.0) -> list[dict]:
         while not until(msgs) and time.monotonic() < deadline:
             try:
                 doc = json.loads(await asyncio.wait_for(ws.recv(), 1.0))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 continue
             except websockets.ConnectionClosed:
                 break
@@ -167,7 +167,7 @@ def test_max_replays_unknown_ids_and_sessions_nobody_watches_end(server):
             while time.monotonic() < end:
                 try:
                     await asyncio.wait_for(ws.recv(), 0.2)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     pass
 
     t0 = time.monotonic()
