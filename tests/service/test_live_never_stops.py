@@ -35,6 +35,7 @@ from radar_io.decoding.decoders import decode_bytes
 from radar_io.recording.rdrlog import RecordingReader
 from radar_io.wirespec.frame import spec_dir
 
+from .test_live_pty import wait_for
 from .test_replay_sessions import recorded_t_ns, write_flight
 
 TOKEN = "walk-token"
@@ -269,7 +270,7 @@ def test_every_route_during_a_go_recording_leaves_the_recording_and_the_source_a
     try:
         svc.wait_ready()
         feeder.start()
-        rec = wait(lambda: svc.get("/api/status")["recording"], "the GO recording")
+        rec = wait_for(lambda: svc.get("/api/status")["recording"], what="the GO recording")
         st0 = svc.get("/api/status")
         watch.start()
         ctx = {"live": rec, "earlier": "earlier"}
@@ -329,16 +330,6 @@ def test_every_route_during_a_go_recording_leaves_the_recording_and_the_source_a
           f"{len(seen)} times: connected, same source, reconnects {st0['reconnects']}")
 
 
-def wait(pred, what: str, timeout_s: float = 30.0) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        v = pred()
-        if v:
-            return v
-        time.sleep(0.05)
-    raise AssertionError(f"timed out waiting for {what}")
-
-
 # -- the figure ------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
@@ -388,7 +379,7 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
     try:
         svc.wait_ready()
         feeder.start()
-        rec = wait(lambda: svc.get("/api/status")["recording"], "the GO recording")
+        rec = wait_for(lambda: svc.get("/api/status")["recording"], what="the GO recording")
         source = svc.get("/api/status")["source"]
         watch.start()
         ws = f"ws://127.0.0.1:{svc.port}"
@@ -414,7 +405,8 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
         state_a = svc.get(f"/api/replays/{a['id']}")
         state_b = svc.get(f"/api/replays/{b['id']}")
         sent = feeder.stop()
-        wait(lambda: svc.get("/api/status")["frames"] >= sent, "the last live frames", 30)
+        wait_for(lambda: svc.get("/api/status")["frames"] >= sent, timeout_s=30,
+                 what="the last live frames")
         time.sleep(0.5)  # the outputs' queues drain
         code, doc = call(svc.base, "POST", "/api/recordings/stop")
         assert code == 200 and doc["closed"] == rec
