@@ -44,7 +44,7 @@ export function renderStatus(st) {
   $("link").className = "tag " + (S.connected ? "ok" : "bad");
   $("c-points").textContent = S.points.length;
   if (!st) return;
-  $("mode").textContent = st.mode.toUpperCase();
+  $("mode").textContent = S.replay ? "REPLAY" : st.mode.toUpperCase();
   $("source").textContent = st.source + (st.connected ? "" : ` (disconnected: ${st.last_error || "…"})`);
   $("calib").textContent = `cal: ${st.calibration}`;
   $("cal-active").textContent = st.calibration;

@@ -1,7 +1,9 @@
 // Recordings and replay: start/stop recording, the recordings list with download and report
-// links, replay controls (pause, resume, step, seek, back to live).
+// links, replay controls (pause, resume, step, seek, back to live). A replay is a session of
+// its own (/api/replays); the views follow its websocket while the live flight goes on.
 import { $, S } from "./state.js";
 import { control, getJSON, onControl } from "./api.js";
+import { watch } from "./live.js";
 
 /** The report of a recording (built by the service: GET /api/recordings/{id}/report). */
 export const reportUrl = (id) => `/api/recordings/${encodeURIComponent(id)}/report`;
@@ -26,9 +28,13 @@ export async function listRecordings() {
   updateLinks();
 }
 
+const session = (op) => `/api/replays/${S.replay.id}${op ? "/" + op : ""}`;
+const onSession = (op, body) => { if (S.replay) control(session(op), body); };
+const endSession = () => { if (S.replay) control(session(), undefined, "DELETE"); };
+
 export function renderReplay(st) {
   if (!st) return;
-  const r = st.replay;
+  const r = S.replay && (st.replays || []).find((x) => x.id === S.replay.id);
   $("replay-state").textContent = r ? `${r.recording}: ${r.position_s.toFixed(1)} / ${r.duration_s.toFixed(1)} s ×${r.speed}${r.paused ? " paused" : ""}${r.finished ? " (end)" : ""}` : "";
   if (r && document.activeElement !== $("seek")) $("seek").value = r.duration_s ? (100 * r.position_s) / r.duration_s : 0;
 }
@@ -38,14 +44,17 @@ export function initReplay() {
   $("rec-list").onchange = updateLinks;
   $("rec-start").onclick = () => control("/api/recordings/start");
   $("rec-stop").onclick = () => control("/api/recordings/stop");
-  $("replay").onclick = () => { S.points = []; control("/api/replay", { recording: $("rec-list").value, speed: Number($("speed").value) }); };
-  $("pause").onclick = () => control("/api/replay/pause");
-  $("resume").onclick = () => control("/api/replay/resume");
-  $("step").onclick = () => control("/api/replay/step", { n: 1 });
-  $("live").onclick = () => { S.points = []; control("/api/replay/stop"); };
+  $("replay").onclick = async () => {
+    const doc = await control("/api/replays", { recording: $("rec-list").value, speed: Number($("speed").value) });
+    if (doc) { endSession(); watch({ id: doc.id, ws: doc.ws }); }
+  };
+  $("pause").onclick = () => onSession("pause");
+  $("resume").onclick = () => onSession("resume");
+  $("step").onclick = () => onSession("step", { n: 1 });
+  $("live").onclick = () => { endSession(); watch(null); };
   $("seek").onchange = () => {
-    const r = S.status && S.status.replay;
-    if (r) control("/api/replay/seek", { position_s: (Number($("seek").value) / 100) * r.duration_s });
+    const r = S.replay && S.status && (S.status.replays || []).find((x) => x.id === S.replay.id);
+    if (r) onSession("seek", { position_s: (Number($("seek").value) / 100) * r.duration_s });
   };
   listRecordings();
   setInterval(listRecordings, 5000);
