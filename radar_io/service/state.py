@@ -17,11 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from radar_io import __version__
-from radar_io.decoding.biases import Calibration, load_calibration
+from radar_io.decoding.biases import load_calibration
 from radar_io.errors import ConfigError, NotFoundError, ValidationError
 from radar_io.coordinates.transforms import load_site
 from radar_io.recording.recorder import Recorder
 from radar_io.service.acquisition import Acquisition
+from radar_io.service.calibrations import CalibrationStore
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
@@ -54,12 +55,10 @@ class ServiceState:
         site_path = cfg.resolved_site()
         self.site = load_site(site_path) if site_path else None
         self.cal_dir = self.data_dir / "calibrations"
-        self.cal_dir.mkdir(exist_ok=True)
-        cal = Calibration()
-        if cfg.calibration:
-            cal = load_calibration(cfg.calibration)
-        elif (self.cal_dir / "active.json").exists():
-            cal = load_calibration(self.cal_dir / "active.json")
+        self.calibrations = CalibrationStore(self.cal_dir)
+        # a bad --calibration is refused; an unreadable active.json is reported, not fatal
+        cal = load_calibration(cfg.calibration) if cfg.calibration \
+            else self.calibrations.load_active()
         self.history = History(int(cfg.history_mb * (1 << 20)))
         self.hub = Hub(self.history, cfg.ws_queue_size, cfg.ws_max_clients,
                        cfg.ws_batch_interval_s)
@@ -212,6 +211,8 @@ class ServiceState:
         st["storage"] = self.recorder.storage()  # free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.acq.calibration.id
+        st["calibration_error"] = self.calibrations.error  # unreadable active.json at start
+        st["calibration_last_good"] = self.calibrations.last_good
         st["control_enabled"] = self.token is not None
         st["replay"] = self.replay.state() if self.replay is not None and st["mode"] == "replay" \
             else None
