@@ -62,6 +62,7 @@ class ServiceConfig:
     mqtt_ca_file: str | None = None  #: mqtts:// CA bundle (default: the system's CAs)
     asterix_out: str | None = None   #: ASTERIX CAT048: udp://host:port, a serial URL/device or a file
     archive_dir: str | None = None   #: archive each closed recording as Parquet (radar-io archive layout)
+    shutdown_timeout_s: Annotated[float, Ge(1.0), Le(600.0)] = 10.0  #: SIGTERM → exit budget
     alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:

@@ -82,6 +82,7 @@ class ServiceState:
         self.air: Any = None
         self._setup_outputs(cfg)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
+        self._shutdown: Any = None  # service.shutdown.Shutdown once a stop has begun
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
         """Reference path, TLM1 / D/A sinks and CAN air data, as configured; a configuration
@@ -143,7 +144,9 @@ class ServiceState:
         if self.cfg.archive_dir:
             from radar_io.service.archiver import RecordingArchiver
 
-            self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options)
+            # recordings left unarchived by the last run first (listed before any can open)
+            self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options,
+                                              backlog=self.recorder.dir.glob("*.rdrlog"))
             self.recorder.on_closed = self.archiver.submit
         self.acq.start()
 
@@ -152,24 +155,33 @@ class ServiceState:
         return {"site": self.site, "spec": self.spec, "calibration": self.acq.calibration,
                 "reference_path": self.path}
 
+    def begin_shutdown(self) -> None:
+        """The first thing of a stop (``serve`` calls it as soon as the server starts to
+        stop): the reader stops and the recording is closed and fsynced, on a thread of its
+        own, within ``shutdown_timeout_s`` (see :mod:`radar_io.service.shutdown`)."""
+        if self._shutdown is None:
+            from radar_io.service.shutdown import Shutdown
+
+            self._shutdown = Shutdown(self.cfg.shutdown_timeout_s,
+                                      [("reader", self.acq.stop), ("recorder", self.recorder.close)])
+
     def stop(self) -> None:
-        """Stop the reader, close the recording, finish archiving, cancel runway jobs, stop
-        the sinks, the MQTT publisher and the air-data reader — each even if one fails."""
-        steps = [("reader", self.acq.stop), ("recorder", self.recorder.close)]
-        if self.archiver is not None:  # finishes the recording just closed
-            steps.append(("archiver", self.archiver.close))
+        """Stop the reader and close the recording first, then stop archiving (the rest
+        resumes at the next start), cancel runway jobs, stop the sinks, the MQTT publisher
+        and the air-data reader — each even if one fails, all within ``shutdown_timeout_s``."""
+        self.begin_shutdown()
+        sd = self._shutdown
+        steps: list[tuple[str, Any]] = []
+        if self.archiver is not None:
+            steps.append(("archiver", lambda: self.archiver.close(sd.left_s())))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files
-            steps.append(("runway jobs", self.runway_jobs.close))
+            steps.append(("runway jobs", lambda: self.runway_jobs.close(sd.left_s())))
         steps += [(f"sink {n}", w.close) for n, w in self.sinks.items()]
         if self.mqtt is not None:
             steps.append(("mqtt", self.mqtt.close))  # last word on PREFIX/status: offline
         if self.air is not None:
             steps.append(("air data", self.air.close))
-        for name, step in steps:
-            try:
-                step()
-            except Exception:  # noqa: BLE001 - the other workers must still stop
-                log.exception("stopping %s", name)
+        sd.finish(steps)
 
     # -- helpers for the routers ------------------------------------------------------------
     def latest_radar(self) -> dict[str, Any] | None:
