@@ -26,9 +26,10 @@ import time
 import uuid
 import weakref
 from collections import OrderedDict, deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from radar_io.errors import ConflictError, NotFoundError, RadarIOError
 

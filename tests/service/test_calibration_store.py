@@ -11,7 +11,6 @@ import stat
 import threading
 import time
 import urllib.request
-from pathlib import Path
 
 import pytest
 
