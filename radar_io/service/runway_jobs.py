@@ -87,13 +87,13 @@ def process_video(job: RunwayJob, max_frames: int = MAX_FRAMES,
                   command: Callable[[RunwayJob, int], list[str]] = worker_command) -> None:
     """Run the tracker over ``job.video`` in a child process, updating ``job`` as frames come.
 
-    The child (``command(job, max_frames)``, by default :func:`worker_command`; nice 10) decodes one frame at
-    a time and writes one JSON line per frame on stdout; a process of its own keeps OpenCV
-    and the chain's Python code off the service's GIL. Its stderr goes to a file beside the
-    upload (``VIDEO.stderr``, removed afterwards), so a chatty decoder can never fill a pipe
-    and stall the child; the last line of its tail explains a failed child. Cancelling
-    kills the child; so does running longer than ``timeout_s`` (monotonic), which fails
-    the job saying so.
+    The child (``command(job, max_frames)``, by default :func:`worker_command`; nice 10)
+    decodes one frame at a time and writes one JSON line per frame on stdout; a process of
+    its own keeps OpenCV and the chain's Python code off the service's GIL. Its stderr goes
+    to a file beside the upload (``VIDEO.stderr``, removed afterwards), so a chatty decoder
+    can never fill a pipe and stall the child; the last line of its tail explains a failed
+    child. Cancelling kills the child; so does running longer than ``timeout_s``
+    (monotonic), which fails the job saying so.
     """
     import json
     import subprocess

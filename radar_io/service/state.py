@@ -162,8 +162,8 @@ class ServiceState:
         if self._shutdown is None:
             from radar_io.service.shutdown import Shutdown
 
-            self._shutdown = Shutdown(self.cfg.shutdown_timeout_s,
-                                      [("reader", self.acq.stop), ("recorder", self.recorder.close)])
+            first = [("reader", self.acq.stop), ("recorder", self.recorder.close)]
+            self._shutdown = Shutdown(self.cfg.shutdown_timeout_s, first)
 
     def stop(self) -> None:
         """Stop the reader and close the recording first, then stop archiving (the rest

@@ -1,18 +1,24 @@
 """Runway video jobs with real child processes: a child that floods its stderr still
 finishes (or fails cleanly) and frees the worker; a child over the job's wall-clock limit
 is killed and the job says so. The job runner's child command is pointed at small scripts
-written here (``RunwayJobs(command=…)``); the real vision worker runs in
-test_runway_routes.py."""
+written here (``RunwayJobs(command=…)``); the last test runs the real vision worker on a
+video too long for its ``runway_job_timeout_s``."""
 
 from __future__ import annotations
 
+import json
 import sys
 import time
+import urllib.request
 from pathlib import Path
 
+import cv2
 import pytest
 
 from radar_io.service.runway_jobs import RunwayJob, RunwayJobs
+from radar_io.vision.synth import RunwayPose, focal_for_fov, render_runway
+
+from .liveserver import TOKEN, live_server, service_config
 
 #: a child that talks the worker's protocol on stdout and writes ``MiB`` MiB to stderr first
 FLOOD = """
@@ -114,3 +120,42 @@ def test_a_job_over_its_time_limit_is_killed_and_reported(tmp_path, scripts):
         assert after.state == "done", after.as_dict()
     finally:
         jobs.close()
+
+
+def test_the_service_stops_a_real_job_at_runway_job_timeout_s(tmp_path):
+    """Through the service, with the real vision worker: a 400-frame video under a 1 s limit
+    (the tracker needs several seconds for it) fails saying so, and the next upload runs."""
+    w, h = 640, 480
+    f = focal_for_fov(w, 60.0)
+    video = tmp_path / "long.avi"
+    img = render_runway(RunwayPose(5.0, -4.0, 3.0, 60.0, 10.0), w, h, f)
+    vw = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 25, (w, h), False)
+    for _ in range(400):
+        vw.write(img)
+    vw.release()
+    body = video.read_bytes()
+
+    def call(srv, method: str, path: str, data: bytes | None = None) -> dict:
+        req = urllib.request.Request(srv.base + path, data=data, method=method, headers={
+            "Authorization": f"Bearer {TOKEN}", "Content-Type": "video/x-msvideo"})
+        with urllib.request.urlopen(req, timeout=60) as r:
+            return json.loads(r.read())
+
+    def final(srv, job: str) -> dict:
+        deadline = time.monotonic() + 60
+        while (doc := call(srv, "GET", f"/api/runway/jobs/{job}"))["state"] in ("queued",
+                                                                                "running"):
+            assert time.monotonic() < deadline, doc
+            time.sleep(0.05)
+        return doc
+
+    cfg = service_config(tmp_path / "svc", runway_job_timeout_s=1.0)
+    with live_server(cfg) as srv:
+        q = f"/api/runway?focal_px={f}&half_width_m=22.5"
+        slow = final(srv, call(srv, "POST", q, body)["job"])
+        assert slow["state"] == "failed", slow
+        assert "time limit of 1 s (runway_job_timeout_s)" in slow["error"]
+        assert slow["frames_done"] < 400 and slow["result"] is None
+        # the worker is free: the next job starts (and meets the same limit)
+        nxt = final(srv, call(srv, "POST", q, body)["job"])
+        assert nxt["state"] == "failed" and nxt["frames_done"] < 400

@@ -170,7 +170,8 @@ def test_the_archiver_resumes_what_a_stop_left_queued_and_removes_stale_parts(tm
     first._thread.join(60)
     assert first.archived <= 1
     # an archive interrupted mid-write leaves a hidden temporary file beside its partition
-    stale = archive / "site=unknown" / "date=2026-05-23" / "recording=x" / ".part-0.parquet.ab12.part"
+    stale = (archive / "site=unknown" / "date=2026-05-23" / "recording=x"
+             / ".part-0.parquet.ab12.part")
     stale.parent.mkdir(parents=True, exist_ok=True)
     stale.write_bytes(b"PAR1 half a file")
     done_before = {p: p.stat().st_mtime_ns for p in archive.rglob("part-0.parquet")}
@@ -187,3 +188,32 @@ def test_the_archiver_resumes_what_a_stop_left_queued_and_removes_stale_parts(tm
     finally:
         second.close()
     assert all(p.is_file() for p in paths)  # the recordings themselves stay
+
+
+def test_after_a_crash_the_next_start_archives_the_recording_and_drops_stale_parts(tmp_path):
+    """kill -9 while recording (never closed, so never queued) with an archive cut short
+    beside it: the next start archives the recording and removes the temporary file."""
+    root = tmp_path / "svc"
+    archive = tmp_path / "archive"
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(f'archive_dir = "{archive}"\nauto_record = "always"\n')
+    svc = ServeProcess("sim://", root / "data", extra=("--config", str(cfg)))
+    try:
+        svc.wait_ready()
+        st = _wait(lambda: (s := svc.get("/api/status"))["recording"] and s["frames"] > 500 and s,
+                   what="a recording")
+        svc.proc.kill()
+        svc.proc.wait(10)
+    finally:
+        svc.stop()
+    rec_id = st["recording"]  # e.g. 20261125T223541Z: archived under date=2026-11-25
+    partition = archive / "site=demo" / f"date={rec_id[:4]}-{rec_id[4:6]}-{rec_id[6:8]}"
+    stale = partition / f"recording={rec_id}" / ".part-0.parquet.k9x2.part"
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"PAR1 cut short")
+    with live_server(service_config(root, auto_record="manual", archive_dir=str(archive))) as srv:
+        arc = _wait(lambda: (a := srv.get("/api/status")["archive"])["pending"] == 0
+                    and a["archived"] and a, what="the archive")
+    assert arc["resumed"] == 1 and arc["stale_parts_removed"] == 1 and arc["errors"] == 0
+    parts = [p.parent.name for p in archive.rglob("part-0.parquet")]
+    assert parts == [f"recording={st['recording']}"] and _parts(archive) == []
