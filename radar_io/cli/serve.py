@@ -86,4 +86,3 @@ def run(args: argparse.Namespace) -> int:
         sock.close()
         state.stop()  # no-op after the lifespan's stop; else (a forced exit) the stop now
     return 0
-

@@ -89,10 +89,10 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
 
 
 def save_calibration(cal: Calibration, path: str | os.PathLike[str]) -> None:
-    """Write a calibration set durably: a temporary file of its own beside ``path``, fsynced,
-    renamed over ``path``, then the directory fsynced (:class:`~radar_io.sinks.atomic.AtomicFile`).
-    A power cut leaves the old file or the new one, never a mix; StorageError when the
-    disk refuses."""
+    """Write a calibration set durably: a temporary file of its own beside ``path``,
+    fsynced, renamed over ``path``, then the directory fsynced
+    (:class:`~radar_io.sinks.atomic.AtomicFile`). A power cut leaves the old file or the
+    new one, never a mix; StorageError when the disk refuses."""
     from radar_io.sinks.atomic import AtomicFile
 
     out = AtomicFile(path)

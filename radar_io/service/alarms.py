@@ -19,7 +19,8 @@ Pure engine (no web, no threads of its own); times are seconds since the Unix ep
   :meth:`AlarmEngine.check_status`: ``source_stale`` (no frame for ``stale_s``),
   ``crc_rate`` (CRC errors per second over ``crc_window_s``), ``recording_error``,
   ``uplink`` (a TLM / D/A sink not connected), ``low_disk`` (free bytes in the data
-  directory) and ``calibration_unreadable`` (``active.json`` could not be read at start). Their limits can be changed or switched off with config entries
+  directory) and ``calibration_unreadable`` (``active.json`` could not be read at start).
+  Their limits can be changed or switched off with config entries
   ``{builtin = "crc_rate", max = 5.0}`` / ``{builtin = "low_disk", enabled = false}``.
 
 Each active alarm is ``{id, name, column, value, limit, since, acknowledged}`` (``since``:
