@@ -68,7 +68,7 @@ class RunwayJob:
 
 
 #: wall-clock limit of one job (s), measured with the monotonic clock from its start
-DEFAULT_TIMEOUT_S = 600.0
+DEFAULT_TIMEOUT_S = 1800.0
 #: bytes of the child's stderr shown in a failed job's error (the last line of this tail)
 STDERR_TAIL_BYTES = 4096
 
