@@ -8,6 +8,7 @@ from typing import Any
 
 from radar_io.errors import ConfigError
 
+
 def add_subparser(sub: Any) -> None:
     p = sub.add_parser("serve", help="the live service: REST, websocket and the dashboard",
                        description="Acquire from a source, record, and serve the API and the "
@@ -47,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     from radar_io.service.app import build_app
     from radar_io.service.config import load_config
+    from radar_io.service.shutdown import GracefulServer
 
     cfg = load_config(args.config, {
         "source": args.source, "host": args.host, "port": args.port, "site": args.site,
@@ -71,12 +73,16 @@ def run(args: argparse.Namespace) -> int:
           f"{'enabled' if state.token else 'disabled (no token configured)'}", file=sys.stderr)
     print(f"listening on http://{host}:{port}/ (dashboard; API docs /docs)", file=sys.stderr,
           flush=True)
-    # per-message deflate would compress every measurement once per client: off
+    # per-message deflate would compress every measurement once per client: off. Open
+    # connections get a fifth of the shutdown budget to close (a client that never reads
+    # cannot hold the stop); the recording is closed meanwhile (GracefulServer).
     config = uvicorn.Config(app, log_level="warning", ws_ping_interval=20,
                             ws_per_message_deflate=False,
+                            timeout_graceful_shutdown=max(1, int(cfg.shutdown_timeout_s // 5)),
                             h11_max_incomplete_event_size=max(64 << 10, 4 * cfg.max_header_kb << 10))
     try:
-        uvicorn.Server(config).run(sockets=[sock])
+        GracefulServer(config, state.begin_shutdown).run(sockets=[sock])
     finally:
         sock.close()
+        state.stop()  # no-op after the lifespan's stop; else (a forced exit) the stop now
     return 0

@@ -22,10 +22,9 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from radar_io.errors import ConfigError
+from radar_io.errors import ConfigError, StorageError
 from radar_io.textfiles import Fields, read_json, show
 
 FORMAT = "radar_io-calibration/1"
@@ -90,11 +89,19 @@ def load_calibration(path: str | os.PathLike[str]) -> Calibration:
 
 
 def save_calibration(cal: Calibration, path: str | os.PathLike[str]) -> None:
-    """Write a calibration set atomically (temporary file + rename)."""
-    p = Path(path)
-    tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(json.dumps(cal.to_dict(), indent=2) + "\n", encoding="utf-8")
-    os.replace(tmp, p)
+    """Write a calibration set durably: a temporary file of its own beside ``path``,
+    fsynced, renamed over ``path``, then the directory fsynced
+    (:class:`~radar_io.sinks.atomic.AtomicFile`). A power cut leaves the old file or the
+    new one, never a mix; StorageError when the disk refuses."""
+    from radar_io.sinks.atomic import AtomicFile
+
+    out = AtomicFile(path)
+    try:
+        out.tmp_path.write_text(json.dumps(cal.to_dict(), indent=2) + "\n", encoding="utf-8")
+    except OSError as exc:
+        out.abort()
+        raise StorageError(f"cannot write {out.path}: {exc.strerror}", errno=exc.errno) from exc
+    out.commit()
 
 
 def utc_now_iso() -> str:

@@ -18,8 +18,9 @@ Pure engine (no web, no threads of its own); times are seconds since the Unix ep
 * **Built-in alarms** are checked from the service status dict by
   :meth:`AlarmEngine.check_status`: ``source_stale`` (no frame for ``stale_s``),
   ``crc_rate`` (CRC errors per second over ``crc_window_s``), ``recording_error``,
-  ``uplink`` (a TLM / D/A sink not connected) and ``low_disk`` (free bytes in the data
-  directory). Their limits can be changed or switched off with config entries
+  ``uplink`` (a TLM / D/A sink not connected), ``low_disk`` (free bytes in the data
+  directory) and ``calibration_unreadable`` (``active.json`` could not be read at start).
+  Their limits can be changed or switched off with config entries
   ``{builtin = "crc_rate", max = 5.0}`` / ``{builtin = "low_disk", enabled = false}``.
 
 Each active alarm is ``{id, name, column, value, limit, since, acknowledged}`` (``since``:
@@ -49,11 +50,12 @@ BUILTINS: dict[str, tuple[str, float, str]] = {
     "recording_error": ("recording_error", 0.0, "flag"),
     "uplink": ("uplink_connected", 0.0, "flag"),
     "low_disk": ("disk_free_bytes", 1e9, "min"),
+    "calibration_unreadable": ("calibration_error", 0.0, "flag"),
 }
 BUILTIN_NAMES = {
     "source_stale": "source stale", "crc_rate": "CRC error rate",
     "recording_error": "recording error", "uplink": "uplink disconnected",
-    "low_disk": "low disk space",
+    "low_disk": "low disk space", "calibration_unreadable": "calibration set unreadable",
 }
 _RULE_KEYS = {"id", "name", "column", "min", "max", "for_s", "builtin", "enabled"}
 
@@ -208,6 +210,9 @@ class AlarmEngine:
                         if isinstance(s, dict) and not s.get("connected", True)]
                 changed |= self._flag("uplink", "uplink_connected",
                                       ", ".join(down) + " not connected" if down else None, now)
+            if lim.get("calibration_unreadable") is not None:
+                changed |= self._flag("calibration_unreadable", "calibration_error",
+                                      status.get("calibration_error"), now)
             if lim.get("low_disk") is not None and status.get("disk_free_bytes") is not None:
                 changed |= self._judge("low_disk", BUILTIN_NAMES["low_disk"], "disk_free_bytes",
                                        float(status["disk_free_bytes"]), now, lo=lim["low_disk"])

@@ -40,6 +40,7 @@ class ServiceConfig:
     retry_s: Annotated[float, Gt(0.0), Le(3600.0)] = 5.0  #: automatic recording: retry after a disk error
     low_space_mb: Annotated[float, Ge(0.0)] = 1024.0      #: status storage.low_space below this free space
     runway_queue: Annotated[int, Ge(0), Le(100)] = 2      #: runway video jobs waiting (429 beyond)
+    runway_job_timeout_s: Annotated[float, Gt(0.0), Le(86400.0)] = 1800.0  #: one video job (s)
     history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)
     ws_queue_size: Annotated[int, Ge(1), Le(1_000_000)] = 5000  #: per client; oldest skipped beyond
     ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
@@ -63,6 +64,7 @@ class ServiceConfig:
     mqtt_ca_file: str | None = None  #: mqtts:// CA bundle (default: the system's CAs)
     asterix_out: str | None = None   #: ASTERIX CAT048: udp://host:port, a serial URL/device or a file
     archive_dir: str | None = None   #: archive each closed recording as Parquet (radar-io archive layout)
+    shutdown_timeout_s: Annotated[float, Ge(1.0), Le(600.0)] = 10.0  #: SIGTERM → exit budget
     alarms: list[dict[str, Any]] = field(default_factory=list)  #: [[alarms]] (service/alarms.py)
 
     def resolved_site(self) -> str | None:

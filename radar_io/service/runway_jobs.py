@@ -9,7 +9,10 @@ job states. One job runs at a time (``workers``), ``max_queued`` more may wait; 
 that :meth:`RunwayJobs.submit` raises :class:`QueueFull` (HTTP 429).
 
 The child runs at nice 10 with OpenCV on one thread and its own interpreter (no GIL
-shared with the service), so the radar reader and the event loop keep answering.
+shared with the service), so the radar reader and the event loop keep answering. Its
+stderr goes to a file in the spool directory (never a pipe that could fill and stall it),
+and a job running longer than its wall-clock limit (config ``runway_job_timeout_s``,
+monotonic clock) has its child terminated and fails saying so; the worker is then free.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import time
 import uuid
 import weakref
 from collections import OrderedDict, deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -63,47 +67,80 @@ class RunwayJob:
                 "created_unix_s": self.created_unix_s, "finished_unix_s": self.finished_unix_s}
 
 
-def process_video(job: RunwayJob, max_frames: int = MAX_FRAMES) -> None:
+#: wall-clock limit of one job (s), measured with the monotonic clock from its start
+DEFAULT_TIMEOUT_S = 1800.0
+#: bytes of the child's stderr shown in a failed job's error (the last line of this tail)
+STDERR_TAIL_BYTES = 4096
+
+
+def worker_command(job: RunwayJob, max_frames: int) -> list[str]:
+    """The child's command line: ``python -m radar_io.service.runway_jobs VIDEO …``."""
+    import sys
+
+    pp = job.principal_point or ("", "")
+    return [sys.executable, "-m", "radar_io.service.runway_jobs", str(job.video),
+            repr(job.focal_px), repr(job.half_width_m), str(pp[0]), str(pp[1]), str(max_frames)]
+
+
+def process_video(job: RunwayJob, max_frames: int = MAX_FRAMES,
+                  timeout_s: float = DEFAULT_TIMEOUT_S,
+                  command: Callable[[RunwayJob, int], list[str]] = worker_command) -> None:
     """Run the tracker over ``job.video`` in a child process, updating ``job`` as frames come.
 
-    The child (``python -m radar_io.service.runway_jobs VIDEO …``, nice 10) decodes one
-    frame at a time and writes one JSON line per frame; a process of its own keeps OpenCV
-    and the chain's Python code off the service's GIL. Cancelling kills the child.
+    The child (``command(job, max_frames)``, by default :func:`worker_command`; nice 10)
+    decodes one frame at a time and writes one JSON line per frame on stdout; a process of
+    its own keeps OpenCV and the chain's Python code off the service's GIL. Its stderr goes
+    to a file beside the upload (``VIDEO.stderr``, removed afterwards), so a chatty decoder
+    can never fill a pipe and stall the child; the last line of its tail explains a failed
+    child. Cancelling kills the child; so does running longer than ``timeout_s``
+    (monotonic), which fails the job saying so.
     """
     import json
     import subprocess
-    import sys
 
     pkg_root = str(Path(__file__).resolve().parents[2])
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [pkg_root] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p])}
-    pp = job.principal_point or ("", "")
-    cmd = [sys.executable, "-m", "radar_io.service.runway_jobs", str(job.video), repr(job.focal_px),
-           repr(job.half_width_m), str(pp[0]), str(pp[1]), str(max_frames)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                            preexec_fn=_nice_child if os.name == "posix" else None)
-    killer = threading.Thread(target=_kill_on_cancel, args=(job, proc), daemon=True)
-    killer.start()
-    frames: list[dict[str, Any]] = []
-    error: str | None = None
+    cmd = command(job, max_frames)
+    err_path = job.video.with_name(job.video.name + ".stderr")
+    timed_out = threading.Event()
+    with open(err_path, "wb") as err_file:
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=err_file, env=env,
+                                preexec_fn=_nice_child if os.name == "posix" else None)
     try:
+        watcher = threading.Thread(target=_watch, args=(job, proc, timeout_s, timed_out),
+                                   name=f"runway-watch-{job.id}", daemon=True)
+        watcher.start()
+        frames: list[dict[str, Any]] = []
+        error: str | None = None
         assert proc.stdout is not None
-        for line in proc.stdout:
-            doc = json.loads(line)
-            if "frame" in doc:
-                frames.append(doc)
-                job.frames_done = len(frames)
-            elif "frames_total" in doc:
-                job.frames_total = doc["frames_total"]
-            elif "error" in doc:
-                error = doc["error"]
-    finally:
-        proc.stdout.close()  # type: ignore[union-attr]
-        err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+        with proc.stdout:
+            for line in proc.stdout:
+                doc = json.loads(line)
+                if "frame" in doc:
+                    frames.append(doc)
+                    job.frames_done = len(frames)
+                elif "frames_total" in doc:
+                    job.frames_total = doc["frames_total"]
+                elif "error" in doc:
+                    error = doc["error"]
         proc.wait()
-        proc.stderr.close()  # type: ignore[union-attr]
+        watcher.join()
+        err = _tail(err_path)
+    finally:
+        if proc.poll() is None:  # an exception above: never leave the child running
+            proc.kill()
+            proc.wait()
+        try:
+            os.unlink(err_path)
+        except OSError:
+            pass
     if job.cancel.is_set():
         return
+    if timed_out.is_set():
+        raise RadarIOError(f"runway job stopped: longer than its time limit of {timeout_s:g} s "
+                           f"(runway_job_timeout_s) after {len(frames)} frames")
     if error is not None:
         raise RadarIOError(error)
     if proc.returncode != 0:
@@ -115,11 +152,42 @@ def process_video(job: RunwayJob, max_frames: int = MAX_FRAMES) -> None:
     job.result = {"frames": frames, "found": sum(1 for f in frames if f["found"])}
 
 
-def _kill_on_cancel(job: RunwayJob, proc: Any) -> None:
+def _watch(job: RunwayJob, proc: Any, timeout_s: float, timed_out: threading.Event) -> None:
+    """Kill the child when the job is cancelled or has run ``timeout_s`` (monotonic)."""
+    deadline = time.monotonic() + timeout_s
     while proc.poll() is None:
-        if job.cancel.wait(0.2):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            timed_out.set()
+            log.warning("runway job %s: time limit of %g s reached, stopping its worker",
+                        job.id, timeout_s)
+            _end(proc)
+            return
+        if job.cancel.wait(min(0.2, left)):
             proc.kill()
             return
+
+
+def _end(proc: Any, grace_s: float = 2.0) -> None:
+    """SIGTERM, then SIGKILL after ``grace_s``."""
+    import subprocess
+
+    proc.terminate()
+    try:
+        proc.wait(grace_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+def _tail(path: Path, size: int = STDERR_TAIL_BYTES) -> str:
+    """The last ``size`` bytes of a file as text ('' when it cannot be read)."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - size))
+            return f.read().decode(errors="replace")
+    except OSError:
+        return ""
 
 
 def _nice_child() -> None:
@@ -169,10 +237,16 @@ class RunwayJobs:
     """The job table and its worker thread(s); all methods are safe from any thread."""
 
     def __init__(self, workers: int = 1, max_queued: int = 2, keep_finished: int = 16,
-                 max_frames: int = MAX_FRAMES, spool_dir: Path | None = None) -> None:
+                 max_frames: int = MAX_FRAMES, spool_dir: Path | None = None,
+                 timeout_s: float = DEFAULT_TIMEOUT_S,
+                 command: Callable[[RunwayJob, int], list[str]] = worker_command) -> None:
+        """``timeout_s``: wall-clock limit of one job (monotonic); ``command``: the child's
+        command line for a job (the vision worker of this module unless given)."""
         self.max_queued = max_queued
         self.keep_finished = keep_finished
         self.max_frames = max_frames
+        self.timeout_s = timeout_s
+        self.command = command
         self.spool_dir = Path(tempfile.mkdtemp(prefix="radar-runway-", dir=spool_dir))
         self._cleanup = weakref.finalize(self, shutil.rmtree, str(self.spool_dir), True)
         self._jobs: OrderedDict[str, RunwayJob] = OrderedDict()
@@ -256,7 +330,7 @@ class RunwayJobs:
                 self._running += 1
             state, error = "done", None
             try:
-                process_video(job, self.max_frames)
+                process_video(job, self.max_frames, self.timeout_s, self.command)
                 if job.cancel.is_set():
                     state = "cancelled"
             except RadarIOError as exc:

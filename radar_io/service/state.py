@@ -23,10 +23,11 @@ from pathlib import Path
 from typing import Any
 
 from radar_io import __version__
-from radar_io.decoding.biases import Calibration, load_calibration
+from radar_io.decoding.biases import load_calibration
 from radar_io.errors import ConfigError, NotFoundError, ValidationError
 from radar_io.coordinates.transforms import load_site
 from radar_io.recording.recorder import Recorder
+from radar_io.service.calibrations import CalibrationStore
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
@@ -61,12 +62,10 @@ class ServiceState:
         site_path = cfg.resolved_site()
         self.site = load_site(site_path) if site_path else None
         self.cal_dir = self.data_dir / "calibrations"
-        self.cal_dir.mkdir(exist_ok=True)
-        cal = Calibration()
-        if cfg.calibration:
-            cal = load_calibration(cfg.calibration)
-        elif (self.cal_dir / "active.json").exists():
-            cal = load_calibration(self.cal_dir / "active.json")
+        self.calibrations = CalibrationStore(self.cal_dir)
+        # a bad --calibration is refused; an unreadable active.json is reported, not fatal
+        cal = load_calibration(cfg.calibration) if cfg.calibration \
+            else self.calibrations.load_active()
         self.history = History(int(cfg.history_mb * (1 << 20)))
         self.hub = Hub(self.history, cfg.ws_queue_size, cfg.ws_max_clients,
                        cfg.ws_batch_interval_s)
@@ -98,6 +97,7 @@ class ServiceState:
         self.air: Any = None
         self._setup_outputs(cfg)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
+        self._shutdown: Any = None  # service.shutdown.Shutdown once a stop has begun
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
         """Reference path, TLM1 / D/A sinks and CAN air data, as configured; a configuration
@@ -160,7 +160,9 @@ class ServiceState:
         if self.cfg.archive_dir:
             from radar_io.service.archiver import RecordingArchiver
 
-            self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options)
+            # recordings left unarchived by the last run first (listed before any can open)
+            self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options,
+                                              backlog=self.recorder.dir.glob("*.rdrlog"))
             self.recorder.on_closed = self.archiver.submit
         self.replays.start(loop)
         self.live.start()
@@ -181,26 +183,36 @@ class ServiceState:
         return {"spec": self.spec, "site": self.site, "calibration": self.live.calibration,
                 "processors": list(self.extra_processors)}
 
+    def begin_shutdown(self) -> None:
+        """The first thing of a stop (``serve`` calls it as soon as the server starts to
+        stop): the reader stops and the recording is closed and fsynced, then the replay
+        sessions stop, on a thread of its own, within ``shutdown_timeout_s`` (see
+        :mod:`radar_io.service.shutdown`)."""
+        if self._shutdown is None:
+            from radar_io.service.shutdown import Shutdown
+
+            first = [("reader", self.live.stop), ("recorder", self.recorder.close),
+                     ("replay sessions", self.replays.close)]
+            self._shutdown = Shutdown(self.cfg.shutdown_timeout_s, first)
+
     def stop(self) -> None:
-        """Stop the replay sessions and the live reader, close the recording, finish
-        archiving, cancel runway jobs, stop the sinks, the MQTT publisher and the air-data
-        reader — each even if one fails."""
-        steps = [("replay sessions", self.replays.close), ("reader", self.live.stop),
-                 ("recorder", self.recorder.close)]
-        if self.archiver is not None:  # finishes the recording just closed
-            steps.append(("archiver", self.archiver.close))
+        """Stop the reader and close the recording first, then the replay sessions, then stop
+        archiving (the rest resumes at the next start), cancel runway jobs, stop the sinks,
+        the MQTT publisher and the air-data reader — each even if one fails, all within
+        ``shutdown_timeout_s``."""
+        self.begin_shutdown()
+        sd = self._shutdown
+        steps: list[tuple[str, Any]] = []
+        if self.archiver is not None:
+            steps.append(("archiver", lambda: self.archiver.close(sd.left_s())))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files
-            steps.append(("runway jobs", self.runway_jobs.close))
+            steps.append(("runway jobs", lambda: self.runway_jobs.close(sd.left_s())))
         steps += [(f"sink {n}", w.close) for n, w in self.sinks.items()]
         if self.mqtt is not None:
             steps.append(("mqtt", self.mqtt.close))  # last word on PREFIX/status: offline
         if self.air is not None:
             steps.append(("air data", self.air.close))
-        for name, step in steps:
-            try:
-                step()
-            except Exception:  # noqa: BLE001 - the other workers must still stop
-                log.exception("stopping %s", name)
+        sd.finish(steps)
 
     # -- helpers for the routers ------------------------------------------------------------
     def latest_radar(self) -> dict[str, Any] | None:
@@ -242,6 +254,8 @@ class ServiceState:
         st["storage"] = self.recorder.storage()  # free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
         st["calibration"] = self.live.calibration.id
+        st["calibration_error"] = self.calibrations.error  # unreadable active.json at start
+        st["calibration_last_good"] = self.calibrations.last_good
         st["control_enabled"] = self.token is not None
         st["replays"] = self.replays.brief()
         st["site"] = self.site.name if self.site else None

@@ -8,7 +8,7 @@ from typing import Any, Literal
 from fastapi import APIRouter, Body, Depends
 from pydantic import BaseModel, ConfigDict, Field
 
-from radar_io.decoding.biases import BIAS_LIMITS, FORMAT, Calibration, save_calibration, utc_now_iso
+from radar_io.decoding.biases import BIAS_LIMITS, FORMAT, Calibration, utc_now_iso
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
 from radar_io.service.state import ID_PATTERN, ServiceState, check_id
@@ -72,14 +72,13 @@ def put_calibration(doc: CalibrationDoc = Body(..., examples=[{
         "format": "radar_io-calibration/1", "id": "flight-7",
         "biases": {"dsr_m": 3.1, "del_deg": -0.012, "daz_deg": 0.034}}]),
         state: ServiceState = Depends(get_state)) -> dict[str, Any]:
-    """Apply a calibration set live (and keep it as the active set for restarts)."""
+    """Apply a calibration set live and keep it as the active set for restarts (written
+    durably; every applied version is kept in ``calibrations/history/``)."""
     cal = Calibration.from_dict(doc.model_dump(), source="request")  # ConfigError → 422
     if not cal.created_utc:
         cal = Calibration(**{**cal.__dict__, "created_utc": utc_now_iso()})
     check_id(cal.id, "calibration id")
-    save_calibration(cal, state.cal_dir / f"{cal.id}.json")
-    save_calibration(cal, state.cal_dir / "active.json")
-    state.live.set_calibration(cal)
+    state.calibrations.save(cal, apply=state.live.set_calibration)
     return cal.to_dict()
 
 

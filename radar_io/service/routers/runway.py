@@ -25,7 +25,7 @@ from pydantic import BaseModel, Field
 
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import require_token
-from radar_io.service.runway_jobs import MAX_FRAMES, RunwayJobs
+from radar_io.service.runway_jobs import DEFAULT_TIMEOUT_S, MAX_FRAMES, RunwayJobs
 
 MAX_BODY = 512 << 20   #: bytes accepted for one upload (config max_upload_mb)
 
@@ -37,12 +37,15 @@ _jobs_lock = threading.Lock()
 
 
 def jobs_of(app: Any) -> RunwayJobs:
-    """The service's runway job table, created on first use (config: runway_queue); closed
-    by the service's stop()."""
+    """The service's runway job table, created on first use (config: runway_queue,
+    runway_job_timeout_s); closed by the service's stop()."""
     state = app.state.service
     with _jobs_lock:
         if getattr(state, "runway_jobs", None) is None:
-            state.runway_jobs = RunwayJobs(max_queued=int(getattr(state.cfg, "runway_queue", 2)))
+            cfg = state.cfg
+            state.runway_jobs = RunwayJobs(max_queued=int(getattr(cfg, "runway_queue", 2)),
+                                           timeout_s=float(getattr(cfg, "runway_job_timeout_s",
+                                                                   DEFAULT_TIMEOUT_S)))
         return state.runway_jobs
 
 

@@ -16,5 +16,7 @@ router = APIRouter(tags=["live"])
 @router.get("/api/status")
 async def status(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Source, link state, framer counters, rate, lamps, recording, websocket clients and
-    history, uplinks (``uplink.<name>``: connected, reconnects, last_error) and air data."""
+    history, uplinks (``uplink.<name>``: connected, reconnects, last_error) and air data;
+    ``calibration_error`` / ``calibration_last_good`` when ``active.json`` was unreadable
+    at start."""
     return state.status()
