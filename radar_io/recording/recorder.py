@@ -511,6 +511,7 @@ class Recorder:
         if op.kind != "open" or op.rec.reason != "manual" or not isinstance(exc, RadarIOError):
             return False
         self._note(exc)
+        self._failing = True  # shown until the disk takes something again
         rec = op.rec
         with self._lock:
             kept = deque(o for o in self._q if o.rec is not rec)
