@@ -123,7 +123,9 @@ class RecordingWriter:
 
     def __init__(self, path: str | os.PathLike[str], spec: FrameSpec, *, site: Site | None = None,
                  source: str = "", fsync_interval_s: float = 1.0,
-                 extra: dict[str, Any] | None = None) -> None:
+                 extra: dict[str, Any] | None = None, sync_header: bool = True) -> None:
+        """``sync_header=False``: the header's fsync is left to the fsync thread (its first
+        job), so the caller does not wait for the disk."""
         self.path = Path(path)
         self.fsync_interval_s = fsync_interval_s
         self.header: dict[str, Any] = {
@@ -148,7 +150,8 @@ class RecordingWriter:
         hdr = json.dumps(self.header, sort_keys=True).encode()
         try:
             self._write(FILE_MAGIC + struct.pack(">I", len(hdr)) + hdr + struct.pack(">I", zlib.crc32(hdr)))
-            os.fsync(self._fd)
+            if sync_header:
+                os.fsync(self._fd)
         except OSError as exc:  # no room even for the header: leave neither fd nor file behind
             os.close(self._fd)
             self._fd = -1
@@ -165,23 +168,37 @@ class RecordingWriter:
         self._sidecars: dict[str, int] = {}  # suffix → fd, fsynced and closed with the file
         # fsync on a thread of its own: a slow disk never holds up the writer (the reader)
         self._closing = threading.Event()
-        self._syncer = threading.Thread(target=self._sync_loop, name="rdrlog-fsync", daemon=True)
+        self._then: Callable[[StorageError | None], None] | None = None
+        self._syncer = threading.Thread(target=self._sync_loop, args=(not sync_header,),
+                                        name="rdrlog-fsync", daemon=True)
         self._syncer.start()
 
-    def _sync_loop(self) -> None:
+    def _sync_loop(self, now: bool) -> None:
+        if now:
+            self._fsync()
         while not self._closing.wait(self.fsync_interval_s):
-            fd = self._fd
-            if fd < 0:
-                return
+            self._fsync()
+        if self._then is not None:  # close_later(): the final fsync and close are ours
             try:
-                for side in list(self._sidecars.values()):
-                    os.fsync(side)
-                os.fsync(fd)
-                self.fsyncs += 1
-            except OSError as exc:  # surfaced: logged now, raised by the next write / close
-                if fd == self._fd and self.fsync_error is None:
-                    self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
-                    log.error("%s", self.fsync_error)
+                self._final()
+            except StorageError as exc:
+                self._then(exc)
+            else:
+                self._then(None)
+
+    def _fsync(self) -> None:
+        fd = self._fd
+        if fd < 0:
+            return
+        try:
+            for side in list(self._sidecars.values()):
+                os.fsync(side)
+            os.fsync(fd)
+            self.fsyncs += 1
+        except OSError as exc:  # surfaced: logged now, raised by the next write / close
+            if fd == self._fd and self.fsync_error is None:
+                self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
+                log.error("%s", self.fsync_error)
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
@@ -250,6 +267,21 @@ class RecordingWriter:
         if self._fd >= 0:
             self._closing.set()
             self._syncer.join()
+            self._final()
+
+    def close_later(self, then: Callable[[StorageError | None], None]) -> None:
+        """Close on the fsync thread (final fsync included): no more writes may follow;
+        ``then(error)`` is called there when the file is closed. :meth:`join` waits."""
+        self._then = then
+        self._closing.set()
+
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait for the fsync thread (and a :meth:`close_later`); True when it has ended."""
+        self._syncer.join(timeout_s)
+        return not self._syncer.is_alive()
+
+    def _final(self) -> None:
+        if self._fd >= 0:
             try:
                 for side in self._sidecars.values():
                     os.fsync(side)

@@ -151,6 +151,7 @@ class Recorder:
         # writer thread state
         self._w: RecordingWriter | None = None
         self._w_rec: _Rec | None = None
+        self._closing_files: list[RecordingWriter] = []  # final fsync on their own threads
         self._failing = False
         self._fsync_bad: int | None = None  # fsyncs count when the last fsync failed
         self._closing = False
@@ -373,6 +374,8 @@ class Recorder:
             self._give_up_mono = time.monotonic() + timeout_s
             self._cond.notify()
         self._writer.join(timeout_s + 1.0)
+        for w in self._closing_files:  # final fsyncs
+            w.join(max(0.0, self._give_up_mono + 1.0 - time.monotonic()))
 
     # -- the writer thread ------------------------------------------------------------------
     def _run(self) -> None:
@@ -441,8 +444,9 @@ class Recorder:
             self._open_file(op.rec)
         elif op.kind == "close":
             if self._w_rec is op.rec:
-                self._close_file()
-            op.rec.closed.set()
+                self._close_file()  # rec.closed is set once the file is closed
+            else:
+                op.rec.closed.set()
         elif op.kind == "event" and op.event is not None:
             try:
                 line = (json.dumps(op.event, allow_nan=False, default=str) + "\n").encode()
@@ -463,7 +467,7 @@ class Recorder:
             try:
                 w = RecordingWriter(path, self.spec, site=self.site, source=self.source,
                                     fsync_interval_s=self.fsync_interval_s,
-                                    extra={"started_by": rec.reason})
+                                    extra={"started_by": rec.reason}, sync_header=False)
                 break
             except RecordingError:
                 if not path.exists():
@@ -474,22 +478,30 @@ class Recorder:
         log.info("recording %s started (%s)", path.name, rec.reason)
 
     def _close_file(self) -> None:
+        """Hand the file to its fsync thread for the final fsync and close: the writer
+        goes on with the next recording at once (the file is complete already)."""
         w, rec = self._w, self._w_rec
         self._w = self._w_rec = None
         if w is None:
             return
-        try:
-            w.close()
-        except RadarIOError as exc:
-            self._note(exc)
-            return
         self._fsync_bad = None
-        log.info("recording %s closed (%d chunks, %d bytes)", w.path.name, w.chunks, w.bytes)
-        if self.on_closed is not None and rec is not None:
-            try:
-                self.on_closed(w.path)
-            except Exception:  # noqa: BLE001 - the writer must go on
-                log.exception("on_closed(%s) failed", w.path)
+        self._closing_files = [c for c in self._closing_files if not c.closed] + [w]
+
+        def then(err: StorageError | None) -> None:  # on the file's fsync thread
+            if err is not None:
+                self._note(err)
+            else:
+                log.info("recording %s closed (%d chunks, %d bytes)", w.path.name, w.chunks,
+                         w.bytes)
+                if self.on_closed is not None:
+                    try:
+                        self.on_closed(w.path)
+                    except Exception:  # noqa: BLE001 - closing must finish
+                        log.exception("on_closed(%s) failed", w.path)
+            if rec is not None:
+                rec.closed.set()
+
+        w.close_later(then)
 
     @staticmethod
     def _append(path: Path, line: bytes) -> None:
