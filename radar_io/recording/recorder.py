@@ -38,10 +38,11 @@ import shutil
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from radar_io.coordinates.transforms import Site
 from radar_io.errors import RadarIOError, RecordingError, StorageError

@@ -19,16 +19,16 @@ import os
 import time
 from pathlib import Path
 
-import pytest
-
 import independent
+import pytest
+from conftest import require_program
+
 from radar_io.benchmarks.service_load import Pty, ServeProcess
 from radar_io.sources.replay import ReplaySource
 
 from .preload import LIBFAKETIME, compile_shim
 from .test_live_pty import wait_for
 from .test_slow_disk import Paced, frames_with_chunks
-from conftest import require_program
 
 GO, IDLE = 0x0005, 0x0004
 RATE_HZ = 1000
@@ -97,8 +97,8 @@ def test_wall_clock_steps_of_an_hour_change_no_duration(tmp_path):
     assert st["crc_errors"] >= len(bad) and st["processing_errors"] == 0, err
     recs = sorted((data / "recordings").glob("*.rdrlog"))
     assert len(recs) == 2, err
-    figures = [f"{len(frames) - len(bad)} good frames sent (and {len(bad)} with a bad CRC), "
-               f"{st['frames']} decoded; both recordings hold every good frame of their span"]
+    figures = [(f"{len(frames) - len(bad)} good frames sent (and {len(bad)} with a bad CRC), "
+                f"{st['frames']} decoded; both recordings hold every good frame of their span")]
     # 0 frames lost; each recording: 2.0 ± 0.1 s of pre-roll before its GO edge
     for p, (go_s, end_s) in zip(recs, GO_PERIODS):
         got = frames_with_chunks(p)

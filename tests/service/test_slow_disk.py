@@ -18,9 +18,10 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import pytest
-
 import independent
+import pytest
+from conftest import require_program
+
 from radar_io.benchmarks.service_load import Pty, ServeProcess, end_process
 from radar_io.framing.framers import Framer
 from radar_io.recording.rdrlog import RecordingReader
@@ -28,7 +29,6 @@ from radar_io.service.config import ServiceConfig
 
 from .preload import compile_shim, name_threads
 from .test_live_pty import wait_for
-from conftest import require_program
 
 GO, IDLE = 0x0005, 0x0004  # GO + RX GOOD, RX GOOD
 
