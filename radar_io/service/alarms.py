@@ -190,7 +190,7 @@ class AlarmEngine:
         ``disk_free_bytes``; ``now_s``: wall clock (a label), ``mono_s``: monotonic clock for
         the CRC window and waits (default ``time.monotonic()``, or ``now_s`` when only that
         is given)."""
-        now = time.time() if now_s is None else now_s
+        now = time.time() if now_s is None else now_s  # a label
         mono = mono_s if mono_s is not None else (time.monotonic() if now_s is None else now_s)
         with self._lock:
             changed = False
@@ -239,7 +239,7 @@ class AlarmEngine:
     def snapshot(self, now_s: float | None = None) -> None:
         """One ``active`` event per active alarm (written when a new recording opens, so
         its event log starts with the alarms already standing)."""
-        t = time.time() if now_s is None else now_s
+        t = time.time() if now_s is None else now_s  # a label
         with self._lock:
             for a in self.active():
                 self._event("active", a, t, time.monotonic(), {"since": a["since"]})
@@ -252,7 +252,7 @@ class AlarmEngine:
                 raise NotFoundError(f"no active alarm {alarm_id!r}")
             if not a["acknowledged"]:
                 a["acknowledged"] = True
-                self._event("ack", a, time.time(), time.monotonic(), {"by": by})
+                self._event("ack", a, time.time(), time.monotonic(), {"by": by})  # label, clock
                 self._changed()
             return dict(a)
 
