@@ -299,8 +299,16 @@ def test_manual_start_on_a_full_disk_is_refused(tmp_path, spec, monkeypatch):
     budget[0] = 1 << 30
     rid = rec.start()
     rec.on_chunk(b"y" * 24, 10**18 + 1, 2)
+    wait_until(lambda: rec.buffer_status()["pending_bytes"] == 0)
+    budget[0] = 0  # full again while the manual recording runs: it is retried, not dropped
+    for i in range(5):
+        rec.on_chunk(bytes([i]) * 24, 10**18 + 2 + i, 3 + i)
+    wait_until(lambda: rec.last_error and "No space left" in rec.last_error)
+    assert rec.current == rid
+    budget[0] = 1 << 30
     assert rec.stop() == rid
-    assert frames_in(rec.dir / f"{rid}.rdrlog") == [b"x" * 24, b"y" * 24]
+    assert frames_in(rec.dir / f"{rid}.rdrlog") == [b"x" * 24, b"y" * 24] + [
+        bytes([i]) * 24 for i in range(5)]
     rec.close()
 
 

@@ -398,6 +398,8 @@ class Recorder:
                     self._abandon()
                     return
                 continue
+            except Exception:  # noqa: BLE001 - a bug: drop this job, keep the writer alive
+                log.exception("recording: %s job failed, dropped", ops[0].kind)
             self._done(ops)
         if self._w is not None:
             self._close_file()
