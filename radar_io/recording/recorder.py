@@ -366,7 +366,7 @@ class Recorder:
         rec = self._rec
         return rec.id if rec is not None else None
 
-    def close(self, timeout_s: float = 10.0) -> None:
+    def close(self, timeout_s: float = 5.0) -> None:
         """End the open recording and let the writer finish the queue (given up after
         ``timeout_s`` if the disk does not take it)."""
         self.stop(wait_s=0)

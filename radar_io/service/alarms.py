@@ -284,7 +284,11 @@ class AlarmEngine:
             return True
         return False
 
-    def _flag(self, aid: str, column: str, problem: Any, now: float, mono: float) -> bool:
+    def _flag(self, aid: str, column: str, problem: Any, now: float,
+              mono: float | None = None) -> bool:
+        """A built-in alarm raised while ``problem`` is set (``mono``: monotonic s, default
+        now)."""
+        mono = time.monotonic() if mono is None else mono
         a = self._active.get(aid)
         if problem:
             if a is None:
