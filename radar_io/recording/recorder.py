@@ -248,9 +248,7 @@ class Recorder:
             self._cond.notify()
 
     def _put_chunk(self, rec: _Rec, data: bytes, t_ns: int, mono: int) -> None:
-        if self._q_bytes + len(data) > self.buffer_bytes:
-            if not self.overflow_chunks:
-                log.error("recording buffer full (%d bytes): dropping chunks", self._q_bytes)
+        if self._q_bytes + len(data) > self.buffer_bytes:  # logged by the writer
             self.overflow_chunks += 1
             self.overflow_bytes += len(data)
             return
@@ -380,7 +378,12 @@ class Recorder:
 
     # -- the writer thread ------------------------------------------------------------------
     def _run(self) -> None:
+        logged_overflow = 0
         while True:
+            if self.overflow_chunks != logged_overflow:  # said here: the reader never logs
+                logged_overflow = self.overflow_chunks
+                log.error("recording buffer full (%d bytes): %d chunks dropped so far",
+                          self.buffer_bytes, logged_overflow)
             with self._lock:
                 while not self._q and not self._closing:
                     self._cond.wait(WRITER_POLL_S if self._w is not None else None)
