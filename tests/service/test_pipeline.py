@@ -67,7 +67,8 @@ def test_sync_edge_on_the_go_falling_frame_belongs_to_the_closing_recording(tmp_
     assert rec.sync_events[-1].recording == rid
     rec.close()  # the writer thread has written the sync index and the events
     assert (rec.dir / f"{rid}.sync.jsonl").read_text().count("\n") == 1
-    kinds = [json.loads(line)["kind"] for line in open(rec.dir / f"{rid}.events.jsonl")]
+    lines = (rec.dir / f"{rid}.events.jsonl").read_text().splitlines()
+    kinds = [json.loads(x)["kind"] for x in lines]
     assert kinds == ["go", "go", "sync"]  # rise, fall, then the edge on the falling frame
 
 
