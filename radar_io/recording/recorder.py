@@ -3,9 +3,10 @@
 The reader thread hands every received chunk to :meth:`Recorder.on_chunk` *before*
 decoding. ``on_chunk`` never touches the disk and never waits on a lock held across I/O:
 it keeps the chunk in a short pre-roll ring and appends it to a queue, under a lock that
-guards memory only. One writer thread (``rdrlog-writer``) owns the files: it opens a
-recording (header + fsync), writes the queued chunks, the recording's events and sync
-index, and closes it (final fsync); the periodic fsync runs on the file's own fsync thread.
+guards memory only. One writer thread (``rdrlog-writer``) owns the files: it creates a
+recording (header), writes the queued chunks, the recording's events and sync index, and
+hands it over to be closed; every fsync — the header's, the one every second, the final
+one before the close — runs on the file's own fsync thread (``rdrlog-fsync``).
 
 A recording starts at the point of the stream where it was asked for, pre-roll included,
 however late its file opens: a recording started by a GO 0→1 edge (seen only after the
