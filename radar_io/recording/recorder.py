@@ -6,7 +6,9 @@ it keeps the chunk in a short pre-roll ring and appends it to a queue, under a l
 guards memory only. One writer thread (``rdrlog-writer``) owns the files: it creates a
 recording (header), writes the queued chunks, the recording's events and sync index, and
 hands it over to be closed; every fsync — the header's, the one every second, the final
-one before the close — runs on the file's own fsync thread (``rdrlog-fsync``).
+one before the close — runs on the file's own fsync thread (``rdrlog-fsync``); only an
+event that arrives after its recording closed (a sync edge on the GO-fall frame) is
+appended and fsynced by the writer itself.
 
 A recording starts at the point of the stream where it was asked for, pre-roll included,
 however late its file opens: a recording started by a GO 0→1 edge (seen only after the
