@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -228,24 +229,173 @@ def test_fsync_error_is_raised_not_swallowed(tmp_path, spec, monkeypatch):
     assert w.closed
 
 
-def test_recorder_on_a_full_disk_never_raises_and_retries(tmp_path, spec, monkeypatch):
+def wait_until(cond, timeout_s: float = 10.0):
+    deadline = time.monotonic() + timeout_s
+    while not (got := cond()):
+        assert time.monotonic() < deadline, "timed out"
+        time.sleep(0.01)
+    return got
+
+
+def frames_in(path) -> list[bytes]:
+    with RecordingReader(path) as r:
+        return [c.data for c in r]
+
+
+def test_recorder_on_a_full_disk_buffers_and_loses_nothing(tmp_path, spec, monkeypatch):
+    """GO rises on a full disk: the recording is started at that point of the stream (its
+    file cannot be created yet); the chunks wait in memory and are all written, pre-roll
+    first, when space comes back — by the writer thread, never by on_chunk."""
     budget = [0]
     disk_full_after(monkeypatch, "recordings", budget)
-    rec = Recorder(tmp_path, spec, None, "test", auto="go", retry_s=0.2)
-    frame = independent.frame(seq=1, sts=5)
-    rec.on_chunk(frame, 1)
-    rec.on_go_edge(True)  # GO rises: the start fails, reported, not raised
-    assert rec.current is None and "No space left" in rec.last_error
-    assert list(rec.dir.iterdir()) == []
-    rec.on_chunk(frame, 2)  # before retry_s: no new attempt
-    assert rec.storage()["errors"] == 1
-    budget[0] = 1 << 30  # space is back
-    time.sleep(0.25)
-    rec.on_chunk(frame, 3)  # retried on the next chunk
-    assert rec.current is not None and rec.last_error is None
+    rec = Recorder(tmp_path, spec, None, "test", auto="go", retry_s=0.1)
+    frames = [independent.frame(seq=i, sts=5) for i in range(40)]
+    rec.on_chunk(frames[0], 10**18, 1)
+    rec.on_go_edge(True)  # GO rises: returns at once, the writer meets the full disk
+    wait_until(lambda: rec.last_error and "No space left" in rec.last_error)
+    rid = rec.current
+    assert rid is not None and list(rec.dir.glob("*.rdrlog")) == []
+    for i in range(1, 30):
+        rec.on_chunk(frames[i], 10**18 + i, 1 + i)
+    time.sleep(0.35)
     st = rec.storage()
-    assert "No space left" in st["last_error"] and st["free_bytes"] > 0
-    rec.stop()
+    assert st["errors"] >= 3 and st["buffer"]["pending_bytes"] == 30 * len(frames[1])  # pre-roll too
+    budget[0] = 1 << 30  # space is back
+    wait_until(lambda: rec.last_error is None and rec.buffer_status()["pending_bytes"] == 0)
+    rec.on_go_edge(False)
+    rec.close()
+    assert frames_in(rec.dir / f"{rid}.rdrlog") == frames[:30]
+    st = rec.storage()
+    assert "No space left" in st["last_error"] and st["buffer"]["overflow_chunks"] == 0
+
+
+def test_recorder_buffer_overflow_is_counted(tmp_path, spec, monkeypatch):
+    budget = [0]
+    disk_full_after(monkeypatch, "recordings", budget)
+    frame = independent.frame(seq=1, sts=5)
+    rec = Recorder(tmp_path, spec, None, "test", auto="always", retry_s=0.1,
+                   buffer_bytes=10 * len(frame))
+    for i in range(25):
+        rec.on_chunk(frame, 10**18 + i, i)
+    st = rec.buffer_status()
+    assert st["pending_bytes"] == 10 * len(frame)
+    assert (st["overflow_chunks"], st["overflow_bytes"]) == (15, 15 * len(frame))
+    budget[0] = 1 << 30
+    wait_until(lambda: rec.buffer_status()["pending_bytes"] == 0)
+    rid = rec.current
+    rec.close()
+    assert len(frames_in(rec.dir / f"{rid}.rdrlog")) == 10
+
+
+def test_manual_start_on_a_full_disk_is_refused(tmp_path, spec, monkeypatch):
+    budget = [0]
+    disk_full_after(monkeypatch, "recordings", budget)
+    rec = Recorder(tmp_path, spec, None, "test", auto="manual", retry_s=0.1)
+    rec.on_chunk(b"x" * 24, 10**18, 1)
+    with pytest.raises(StorageError, match="No space left"):
+        rec.start()
+    assert rec.current is None and rec.buffer_status()["pending_bytes"] == 0
+    assert list(rec.dir.iterdir()) == []
+    budget[0] = 1 << 30
+    rid = rec.start()
+    rec.on_chunk(b"y" * 24, 10**18 + 1, 2)
+    wait_until(lambda: rec.buffer_status()["pending_bytes"] == 0)
+    budget[0] = 0  # full again while the manual recording runs: it is retried, not dropped
+    for i in range(5):
+        rec.on_chunk(bytes([i]) * 24, 10**18 + 2 + i, 3 + i)
+    wait_until(lambda: rec.last_error and "No space left" in rec.last_error)
+    assert rec.current == rid
+    budget[0] = 1 << 30
+    assert rec.stop() == rid
+    assert frames_in(rec.dir / f"{rid}.rdrlog") == [b"x" * 24, b"y" * 24] + [
+        bytes([i]) * 24 for i in range(5)]
+    rec.close()
+
+
+class SlowDisk:
+    """os.fsync / os.write on the recordings take ``delay_s``; records which threads call."""
+
+    def __init__(self, monkeypatch, delay_s: float) -> None:
+        import threading
+
+        self.delay_s, self.threads = delay_s, set()
+        real_fsync, real_write = os.fsync, os.write
+
+        def ours(fd):
+            try:
+                return "recordings" in os.readlink(f"/proc/self/fd/{fd}")
+            except OSError:
+                return False
+
+        def fsync(fd):
+            if ours(fd):
+                self.threads.add(threading.current_thread().name)
+                time.sleep(delay_s)
+            return real_fsync(fd)
+
+        def write(fd, data):
+            if ours(fd):
+                self.threads.add(threading.current_thread().name)
+            return real_write(fd, data)
+
+        monkeypatch.setattr(os, "fsync", fsync)
+        monkeypatch.setattr(os, "write", write)
+
+
+def test_on_chunk_never_waits_for_a_slow_disk(tmp_path, spec, monkeypatch):
+    """fsync takes 0.5 s: GO edges, sync events, manual stop and events from other threads
+    cost the caller of on_chunk nothing; every chunk is in the file, events beside it."""
+    from radar_io.recording.recorder import SyncEvent
+
+    disk = SlowDisk(monkeypatch, 0.5)
+    rec = Recorder(tmp_path, spec, None, "test", auto="go", fsync_interval_s=0.2)
+    worst, sent, ids = 0.0, [], []
+    for i in range(300):
+        data = i.to_bytes(4, "big") * 6
+        t0 = time.perf_counter()
+        rec.on_chunk(data, 10**18 + i * 10**6, i * 10**6)
+        if i % 100 == 10:
+            rec.on_go_edge(True)
+            ids.append(rec.current)
+            rec.on_sync(SyncEvent(seq=i, tod_s=i / 1000, t_ns=10**18 + i * 10**6, msg_seq=i,
+                                  recording=rec.current))
+        if i % 100 == 90:
+            rec.on_go_edge(False)
+        worst = max(worst, time.perf_counter() - t0)
+        if ids and i % 100 >= 10 and i % 100 <= 90:
+            sent.append(data)
+        time.sleep(0.002)
+    rec.close()
+    assert worst < 0.05, worst
+    assert "rdrlog-writer" in disk.threads <= {"rdrlog-writer", "rdrlog-fsync"}  # not ours
+    got = [d for rid in ids for d in frames_in(rec.dir / f"{rid}.rdrlog")]
+    assert [d for d in sent if d in got] == sent  # every chunk while GO was high
+    for rid in ids:
+        events = [json.loads(line) for line in (rec.dir / f"{rid}.events.jsonl").open()]
+        assert [e["kind"] for e in events] == ["go", "sync", "go"]
+        assert [e.get("edge") for e in events] == ["rise", None, "fall"]
+        assert all(isinstance(e["t_ns"], int) and isinstance(e["mono_ns"], int) for e in events)
+        assert (rec.dir / f"{rid}.sync.jsonl").read_text().count("\n") == 1
+
+
+def test_clock_steps_are_events_and_status(tmp_path, spec):
+    rec = Recorder(tmp_path, spec, None, "test", auto="always")
+    t, mono = 10**18, 5 * 10**9
+    for i in range(10):
+        jump = {4: 3600 * 10**9, 7: -int(0.7e9)}.get(i, 0)
+        t += 10**6 + jump
+        mono += 10**6
+        if i == 2:
+            t += int(0.4e9)  # below the threshold: not a step
+        rec.on_chunk(b"z" * 24, t, mono)
+    rid = rec.current
+    rec.close()
+    st = rec.clock_status()
+    assert st["steps"] == 2 and st["last_step"]["step_s"] == pytest.approx(-0.7)
+    assert st["last_step"]["count"] == 2
+    events = [json.loads(line) for line in (rec.dir / f"{rid}.events.jsonl").open()]
+    assert [(e["kind"], e["step_s"]) for e in events] == [("clock_step", 3600.0),
+                                                          ("clock_step", -0.7)]
 
 
 FSIZE_WRITER = textwrap.dedent("""

@@ -84,15 +84,22 @@ def test_alarm_events_of_the_recording_are_tabled(flight, tmp_path):
 
     from radar_io.analysis.flight_digest import digest_recording
     from radar_io.analysis.report import build_report, render_html
+    from radar_io.recording.recorder import Recorder
     from radar_io.service.alarms import AlarmEngine, EventLog, LimitRule
+    from radar_io.wirespec.frame import load_spec
 
     rec = tmp_path / "x.rdrlog"
     shutil.copy(flight, rec)
-    # the service's engine and event log, fed 3 samples: raise at SEQ 7, clear at SEQ 9
+    # the service's engine and event log (through a recorder), fed 3 samples: raise at SEQ
+    # 7, clear at SEQ 9; the recording's events file then sits beside the flight
+    recorder = Recorder(tmp_path / "svc", load_spec(), None, "test", auto="manual")
+    rid = recorder.start()
     eng = AlarmEngine([LimitRule("hi", "height high", "h_m", None, 610.0)], {},
-                      on_event=EventLog(tmp_path, lambda: "x"))
+                      on_event=EventLog(recorder))
     eng.feed([{"h_m": v, "seq": s, "t_ns": 1_800_000_000_000_000_000 + s * 10**6}
               for v, s in ((600.0, 6), (612.5, 7), (611.0, 8), (605.0, 9))])
+    recorder.close()
+    shutil.copy(recorder.dir / f"{rid}.events.jsonl", tmp_path / "x.events.jsonl")
     d = digest_recording(rec)
     assert [(e["action"], e["seq"]) for e in d.alarm_events] == [("raise", 7), ("clear", 9)]
     rep = build_report(d)

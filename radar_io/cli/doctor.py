@@ -16,7 +16,6 @@ import argparse
 import grp
 import os
 import shutil
-import subprocess
 import sys
 import time
 from dataclasses import dataclass
@@ -171,37 +170,17 @@ def check_source(url: str, timeout_s: float = 3.0, spec: Any = None) -> Check:
                  "check that the radar is on and transmitting, and the cable/baud rate")
 
 
-def _run(cmd: list[str]) -> str | None:
-    if shutil.which(cmd[0]) is None:
-        return None
-    try:
-        r = subprocess.run(cmd, capture_output=True, text=True, timeout=3.0, check=False)
-    except (OSError, subprocess.TimeoutExpired):
-        return None
-    return r.stdout if r.returncode == 0 else None
-
-
 def check_clock() -> Check:
     """Clock synchronisation (NTP/PTP) by whichever tool this system has."""
+    from radar_io.service.clock import clock_sync_state
+
     fix = "enable time sync: sudo timedatectl set-ntp true (or install chrony)"
-    out = _run(["timedatectl", "show"])
-    if out is not None:
-        kv = dict(line.split("=", 1) for line in out.splitlines() if "=" in line)
-        if kv.get("NTPSynchronized") == "yes":
-            return Check("OK", "clock", "synchronised (timedatectl: NTPSynchronized=yes)")
-        return Check("WARN", "clock", f"not synchronised (timedatectl: NTPSynchronized="
-                     f"{kv.get('NTPSynchronized', '?')}, NTP={kv.get('NTP', '?')})", fix)
-    if Path("/run/systemd/timesync/synchronized").exists():
-        return Check("OK", "clock", "synchronised (/run/systemd/timesync/synchronized)")
-    out = _run(["chronyc", "tracking"])
-    if out is not None:
-        kv = {k.strip(): v.strip() for k, _, v in (l.partition(":") for l in out.splitlines())}
-        status = kv.get("Leap status", "?")
-        if status == "Normal":
-            return Check("OK", "clock", f"synchronised (chronyc: {kv.get('System time', '')})")
-        return Check("WARN", "clock", f"chronyc leap status {status}", fix)
-    return Check("WARN", "clock", "cannot tell: no timedatectl, systemd-timesyncd state or "
-                 "chronyc on this machine", fix)
+    sync, how = clock_sync_state()
+    if sync:
+        return Check("OK", "clock", f"synchronised ({how})")
+    if sync is None:
+        return Check("WARN", "clock", f"cannot tell: {how}", fix)
+    return Check("WARN", "clock", f"not synchronised ({how})", fix)
 
 
 def default_source() -> str:

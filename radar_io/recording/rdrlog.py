@@ -28,7 +28,10 @@ a ``kill -9`` of the writer loses nothing it had written; ``fsync`` runs every
 ``fsync_interval_s`` on a background thread, for power loss. Disk trouble is a
 :class:`~radar_io.errors.StorageError` carrying the OS ``errno`` (ENOSPC → HTTP 507):
 a file that cannot get its header is closed and removed (no fd, no empty file left);
-a failed ``fsync`` is kept in ``fsync_error`` and raised by the next ``write``/``close``.
+a failed ``fsync`` is kept in ``fsync_error`` and raised by the next ``write``/``close``
+(or taken by :meth:`RecordingWriter.take_fsync_error`, which lets writing go on). Files
+beside the recording (``.events.jsonl``, ``.sync.jsonl``: :meth:`RecordingWriter.write_sidecar`)
+are fsynced with it.
 ``committed_bytes`` is the file size up to the last whole chunk: a download of an open
 recording sends exactly that many bytes. A reader returns every complete chunk; a
 torn tail (a chunk cut short by a crash) is reported and skipped, and a damaged
@@ -120,7 +123,9 @@ class RecordingWriter:
 
     def __init__(self, path: str | os.PathLike[str], spec: FrameSpec, *, site: Site | None = None,
                  source: str = "", fsync_interval_s: float = 1.0,
-                 extra: dict[str, Any] | None = None) -> None:
+                 extra: dict[str, Any] | None = None, sync_header: bool = True) -> None:
+        """``sync_header=False``: the header's fsync is left to the fsync thread (its first
+        job), so the caller does not wait for the disk."""
         self.path = Path(path)
         self.fsync_interval_s = fsync_interval_s
         self.header: dict[str, Any] = {
@@ -145,7 +150,8 @@ class RecordingWriter:
         hdr = json.dumps(self.header, sort_keys=True).encode()
         try:
             self._write(FILE_MAGIC + struct.pack(">I", len(hdr)) + hdr + struct.pack(">I", zlib.crc32(hdr)))
-            os.fsync(self._fd)
+            if sync_header:
+                os.fsync(self._fd)
         except OSError as exc:  # no room even for the header: leave neither fd nor file behind
             os.close(self._fd)
             self._fd = -1
@@ -158,22 +164,41 @@ class RecordingWriter:
         self.chunks = 0
         self.bytes = 0
         self.fsync_error: StorageError | None = None
+        self.fsyncs = 0  #: fsyncs that succeeded (periodic ones)
+        self._sidecars: dict[str, int] = {}  # suffix → fd, fsynced and closed with the file
         # fsync on a thread of its own: a slow disk never holds up the writer (the reader)
         self._closing = threading.Event()
-        self._syncer = threading.Thread(target=self._sync_loop, name="rdrlog-fsync", daemon=True)
+        self._then: Callable[[StorageError | None], None] | None = None
+        self._syncer = threading.Thread(target=self._sync_loop, args=(not sync_header,),
+                                        name="rdrlog-fsync", daemon=True)
         self._syncer.start()
 
-    def _sync_loop(self) -> None:
+    def _sync_loop(self, now: bool) -> None:
+        if now:
+            self._fsync()
         while not self._closing.wait(self.fsync_interval_s):
-            fd = self._fd
-            if fd < 0:
-                return
+            self._fsync()
+        if self._then is not None:  # close_later(): the final fsync and close are ours
             try:
-                os.fsync(fd)
-            except OSError as exc:  # surfaced: logged now, raised by the next write / close
-                if fd == self._fd and self.fsync_error is None:
-                    self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
-                    log.error("%s", self.fsync_error)
+                self._final()
+            except StorageError as exc:
+                self._then(exc)
+            else:
+                self._then(None)
+
+    def _fsync(self) -> None:
+        fd = self._fd
+        if fd < 0:
+            return
+        try:
+            for side in list(self._sidecars.values()):
+                os.fsync(side)
+            os.fsync(fd)
+            self.fsyncs += 1
+        except OSError as exc:  # surfaced: logged now, raised by the next write / close
+            if fd == self._fd and self.fsync_error is None:
+                self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
+                log.error("%s", self.fsync_error)
 
     def _write(self, data: bytes) -> None:
         view = memoryview(data)
@@ -186,8 +211,6 @@ class RecordingWriter:
     def write(self, payload: bytes, t_ns: int | None = None, mono_ns: int | None = None) -> None:
         """Append one chunk of received bytes with its receive time on both clocks
         (default: now; ``mono_ns`` given alone is paired with the wall clock now)."""
-        if self._fd < 0:
-            raise RecordingError(f"recording {self.path} is closed")
         if len(payload) > MAX_CHUNK:
             for k in range(0, len(payload), MAX_CHUNK):
                 self.write(payload[k:k + MAX_CHUNK], t_ns, mono_ns)
@@ -196,18 +219,47 @@ class RecordingWriter:
             raise self.fsync_error
         t = time.time_ns() if t_ns is None else t_ns  # a label only
         mono = (time.monotonic_ns() if t_ns is None else t_ns) if mono_ns is None else mono_ns
-        chunk = encode_chunk(bytes(payload), t, mono)
+        self.write_chunks([(bytes(payload), t, mono)])
+
+    def write_chunks(self, chunks: list[tuple[bytes, int, int]]) -> None:
+        """Append ``(payload, t_ns, mono_ns)`` chunks in one ``write`` (payloads at most
+        ``MAX_CHUNK``). On failure the file is cut back to its last whole chunk (none of
+        these is kept) and StorageError raised; ``fsync_error`` is not looked at."""
+        if self._fd < 0:
+            raise RecordingError(f"recording {self.path} is closed")
+        blob = b"".join(encode_chunk(p, t, m) for p, t, m in chunks)
         try:
-            self._write(chunk)
+            self._write(blob)
         except OSError as exc:
             try:  # a chunk written in part: cut it off so the file ends on a whole chunk
                 os.ftruncate(self._fd, self.committed_bytes)
             except OSError:
                 pass
             raise storage_error("cannot write recording", self.path, exc) from exc
-        self.chunks += 1
-        self.bytes += len(payload)
-        self.committed_bytes += len(chunk)
+        self.chunks += len(chunks)
+        self.bytes += sum(len(p) for p, _, _ in chunks)
+        self.committed_bytes += len(blob)
+
+    def take_fsync_error(self) -> StorageError | None:
+        """The failed periodic fsync since the last call, if any (cleared: writing goes on
+        and the fsync thread keeps trying)."""
+        err, self.fsync_error = self.fsync_error, None
+        return err
+
+    def write_sidecar(self, suffix: str, data: bytes) -> None:
+        """Append ``data`` to the file beside this one with ``suffix`` (``.events.jsonl``),
+        opened on first use, fsynced by the fsync thread and closed with the recording."""
+        fd = self._sidecars.get(suffix)
+        path = self.path.with_suffix(suffix)
+        try:
+            if fd is None:
+                fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+                self._sidecars[suffix] = fd
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view):]
+        except OSError as exc:
+            raise storage_error("cannot write", path, exc) from exc
 
     def close(self) -> None:
         """Stop the fsync thread, fsync and close; a failed fsync (now or earlier) raises
@@ -215,12 +267,32 @@ class RecordingWriter:
         if self._fd >= 0:
             self._closing.set()
             self._syncer.join()
+            self._final()
+
+    def close_later(self, then: Callable[[StorageError | None], None]) -> None:
+        """Close on the fsync thread (final fsync included): no more writes may follow;
+        ``then(error)`` is called there when the file is closed. :meth:`join` waits."""
+        self._then = then
+        self._closing.set()
+
+    def join(self, timeout_s: float | None = None) -> bool:
+        """Wait for the fsync thread (and a :meth:`close_later`); True when it has ended."""
+        self._syncer.join(timeout_s)
+        return not self._syncer.is_alive()
+
+    def _final(self) -> None:
+        if self._fd >= 0:
             try:
+                for side in self._sidecars.values():
+                    os.fsync(side)
                 os.fsync(self._fd)
             except OSError as exc:
                 if self.fsync_error is None:
                     self.fsync_error = storage_error("fsync failed for recording", self.path, exc)
             finally:
+                for side in self._sidecars.values():
+                    os.close(side)
+                self._sidecars.clear()
                 os.close(self._fd)
                 self._fd = -1
             if self.fsync_error is not None:

@@ -1,6 +1,10 @@
 """Limit alarms: configured limits on decoded columns plus built-in health alarms.
 
-Pure engine (no web, no threads of its own); times are seconds since the Unix epoch.
+Pure engine (no web, no threads of its own). Two clocks: every duration (``for_s``, the
+CRC-rate window, the wait for the first frame, ``duration_s``) is measured on a monotonic
+clock (``mono_s`` of :meth:`AlarmEngine.feed` / :meth:`AlarmEngine.check_status`, the
+service passes ``time.monotonic()``), so a wall-clock step neither raises, clears nor
+delays an alarm; ``since`` / ``t_s`` are wall-clock labels (s since the Unix epoch).
 
 * **Limit alarms** come from the config's ``[[alarms]]`` entries::
 
@@ -8,7 +12,7 @@ Pure engine (no web, no threads of its own); times are seconds since the Unix ep
       column = "dz_m"      # any decoded column
       min = -30.0          # optional lower limit (column's unit)
       max = 30.0           # optional upper limit
-      for_s = 0.5          # out of limits this long (message receive time) before raising
+      for_s = 0.5          # out of limits this long (monotonic receive time) before raising
       name = "glide path"  # optional; id defaults to "limit:<column>"
 
   :meth:`AlarmEngine.feed` takes the decoded messages (dicts with ``t_ns`` and ``seq``).
@@ -25,8 +29,9 @@ Pure engine (no web, no threads of its own); times are seconds since the Unix ep
 
 Each active alarm is ``{id, name, column, value, limit, since, acknowledged}`` (``since``:
 raise time, s since the epoch). Every raise, clear and acknowledge calls ``on_event(record)``
-(the record carries the radar SEQ and the time, for the recording's event log) and every
-change of the active list calls ``on_change(alarms)`` (for the websocket).
+(the record carries the radar SEQ and both times, ``t_ns`` and ``mono_ns``, for the
+recording's events) and every change of the active list calls ``on_change(alarms)`` (for
+the websocket).
 """
 
 from __future__ import annotations
@@ -151,15 +156,18 @@ class AlarmEngine:
         self.on_change, self.on_event = on_change, on_event
         self._lock = threading.RLock()
         self._active: dict[str, dict[str, Any]] = {}
-        self._out_since: dict[str, float] = {}      # rule id → first out-of-limit time
+        self._out_since: dict[str, float] = {}      # rule id → first out-of-limit time (mono)
+        self._raised_mono: dict[str, float] = {}    # alarm id → raise time (mono)
         self._crc: deque[tuple[float, int]] = deque()
         self.last_seq: int | None = None
         self._first_check: float | None = None
         self.events: deque[dict[str, Any]] = deque(maxlen=1000)  #: recent raise/clear/ack records
 
     # ------------------------------------------------------------------ inputs
-    def feed(self, msgs: list[dict[str, Any]]) -> None:
-        """Decoded messages, oldest first (``t_ns`` receive time, ``seq`` radar SEQ)."""
+    def feed(self, msgs: list[dict[str, Any]], mono_s: float | None = None) -> None:
+        """Decoded messages, oldest first (``t_ns`` wall-clock receive time, ``seq`` radar
+        SEQ), received at monotonic time ``mono_s`` (s; default: each message's ``t_ns``, for
+        a stream with its own times)."""
         if not msgs:
             return
         with self._lock:
@@ -169,18 +177,23 @@ class AlarmEngine:
                     v = m.get(rule.column)
                     if v is None or (isinstance(v, float) and math.isnan(v)):
                         continue
-                    t = m.get("t_ns", 0) / 1e9 if m.get("t_ns") else time.time()
+                    t = m["t_ns"] / 1e9 if m.get("t_ns") else time.time()  # a label
                     changed |= self._judge(rule.id, rule.name, rule.column, float(v), t,
+                                           t if mono_s is None else mono_s,
                                            lo=rule.min, hi=rule.max, for_s=rule.for_s, m=m)
             last = msgs[-1]
             self.last_seq = last.get("seq", self.last_seq)
             if changed:
                 self._changed()
 
-    def check_status(self, status: dict[str, Any], now_s: float | None = None) -> None:
+    def check_status(self, status: dict[str, Any], now_s: float | None = None,
+                     mono_s: float | None = None) -> None:
         """Built-in alarms from the service status dict (see :meth:`~radar_io.service.state.ServiceState.status`) and
-        ``disk_free_bytes``."""
-        now = time.time() if now_s is None else now_s
+        ``disk_free_bytes``; ``now_s``: wall clock (a label), ``mono_s``: monotonic clock for
+        the CRC window and waits (default ``time.monotonic()``, or ``now_s`` when only that
+        is given)."""
+        now = time.time() if now_s is None else now_s  # a label
+        mono = mono_s if mono_s is not None else (time.monotonic() if now_s is None else now_s)
         with self._lock:
             changed = False
             lim = self.builtin
@@ -188,34 +201,37 @@ class AlarmEngine:
                 age = status.get("last_frame_age_s")
                 if status.get("mode", "live") == "live" and "last_frame_age_s" in status:
                     if self._first_check is None:
-                        self._first_check = now
+                        self._first_check = mono
                     # no frame yet: stale once the engine has waited stale_s for the first
-                    val = float(age) if age is not None else now - self._first_check
+                    val = float(age) if age is not None else mono - self._first_check
                     changed |= self._judge("source_stale", BUILTIN_NAMES["source_stale"],
-                                           "last_frame_age_s", val, now, hi=lim["source_stale"])
+                                           "last_frame_age_s", val, now, mono,
+                                           hi=lim["source_stale"])
             if lim.get("crc_rate") is not None and status.get("crc_errors") is not None:
                 q = self._crc
-                q.append((now, int(status["crc_errors"])))
-                while len(q) > 2 and now - q[1][0] >= self.crc_window_s:
+                q.append((mono, int(status["crc_errors"])))
+                while len(q) > 2 and mono - q[1][0] >= self.crc_window_s:
                     q.popleft()
                 dt = q[-1][0] - q[0][0]
                 rate = (q[-1][1] - q[0][1]) / dt if dt > 0 else 0.0
                 changed |= self._judge("crc_rate", BUILTIN_NAMES["crc_rate"], "crc_errors_per_s",
-                                       max(rate, 0.0), now, hi=lim["crc_rate"])
+                                       max(rate, 0.0), now, mono, hi=lim["crc_rate"])
             if lim.get("recording_error") is not None:
                 err = status.get("recording_error")
-                changed |= self._flag("recording_error", "recording_error", err, now)
+                changed |= self._flag("recording_error", "recording_error", err, now, mono)
             if lim.get("uplink") is not None:
                 down = [k for k, s in (status.get("uplink") or {}).items()
                         if isinstance(s, dict) and not s.get("connected", True)]
                 changed |= self._flag("uplink", "uplink_connected",
-                                      ", ".join(down) + " not connected" if down else None, now)
+                                      ", ".join(down) + " not connected" if down else None,
+                                      now, mono)
             if lim.get("calibration_unreadable") is not None:
                 changed |= self._flag("calibration_unreadable", "calibration_error",
-                                      status.get("calibration_error"), now)
+                                      status.get("calibration_error"), now, mono)
             if lim.get("low_disk") is not None and status.get("disk_free_bytes") is not None:
                 changed |= self._judge("low_disk", BUILTIN_NAMES["low_disk"], "disk_free_bytes",
-                                       float(status["disk_free_bytes"]), now, lo=lim["low_disk"])
+                                       float(status["disk_free_bytes"]), now, mono,
+                                       lo=lim["low_disk"])
             if changed:
                 self._changed()
 
@@ -228,10 +244,10 @@ class AlarmEngine:
     def snapshot(self, now_s: float | None = None) -> None:
         """One ``active`` event per active alarm (written when a new recording opens, so
         its event log starts with the alarms already standing)."""
-        t = time.time() if now_s is None else now_s
+        t = time.time() if now_s is None else now_s  # a label
         with self._lock:
             for a in self.active():
-                self._event("active", a, t, {"since": a["since"]})
+                self._event("active", a, t, time.monotonic(), {"since": a["since"]})
 
     def acknowledge(self, alarm_id: str, by: str = "operator") -> dict[str, Any]:
         """Mark an active alarm acknowledged (it stays active until it clears)."""
@@ -241,15 +257,16 @@ class AlarmEngine:
                 raise NotFoundError(f"no active alarm {alarm_id!r}")
             if not a["acknowledged"]:
                 a["acknowledged"] = True
-                self._event("ack", a, time.time(), {"by": by})
+                self._event("ack", a, time.time(), time.monotonic(), {"by": by})  # label, clock
                 self._changed()
             return dict(a)
 
     # ------------------------------------------------------------------ internals
-    def _judge(self, aid: str, name: str, column: str, value: float, t: float, *,
+    def _judge(self, aid: str, name: str, column: str, value: float, t: float, mono: float, *,
                lo: float | None = None, hi: float | None = None, for_s: float = 0.0,
                m: dict[str, Any] | None = None) -> bool:
-        """Update one limit alarm with one value at time ``t``; True when raised or cleared."""
+        """Update one limit alarm with one value at wall time ``t`` (label) and monotonic
+        time ``mono`` (s); True when raised or cleared."""
         limit = None
         if hi is not None and value > hi:
             limit = hi
@@ -260,48 +277,55 @@ class AlarmEngine:
             self._out_since.pop(aid, None)
             if a is not None:
                 a["value"] = value
-                self._clear(aid, t, m)
+                self._clear(aid, t, mono, m)
                 return True
             return False
-        t0 = self._out_since.setdefault(aid, t)
+        t0 = self._out_since.setdefault(aid, mono)
         if a is not None:
             a["value"] = value
             return False
-        if t - t0 >= for_s:
-            self._raise(aid, name, column, value, limit, t, m)
+        if mono - t0 >= for_s:
+            self._raise(aid, name, column, value, limit, t, mono, m)
             return True
         return False
 
-    def _flag(self, aid: str, column: str, problem: Any, now: float) -> bool:
+    def _flag(self, aid: str, column: str, problem: Any, now: float,
+              mono: float | None = None) -> bool:
+        """A built-in alarm raised while ``problem`` is set (``mono``: monotonic s, default
+        now)."""
+        mono = time.monotonic() if mono is None else mono
         a = self._active.get(aid)
         if problem:
             if a is None:
-                self._raise(aid, BUILTIN_NAMES[aid], column, str(problem), None, now, None)
+                self._raise(aid, BUILTIN_NAMES[aid], column, str(problem), None, now, mono, None)
                 return True
             a["value"] = str(problem)
             return False
         if a is not None:
-            self._clear(aid, now, None)
+            self._clear(aid, now, mono, None)
             return True
         return False
 
     def _raise(self, aid: str, name: str, column: str, value: Any, limit: float | None,
-               t: float, m: dict[str, Any] | None) -> None:
+               t: float, mono: float, m: dict[str, Any] | None) -> None:
         a = {"id": aid, "name": name, "column": column, "value": value, "limit": limit,
              "since": t, "since_utc": _iso(t), "acknowledged": False}
         self._active[aid] = a
-        self._event("raise", a, t, {}, m)
+        self._raised_mono[aid] = mono
+        self._event("raise", a, t, mono, {}, m)
 
-    def _clear(self, aid: str, t: float, m: dict[str, Any] | None) -> None:
+    def _clear(self, aid: str, t: float, mono: float, m: dict[str, Any] | None) -> None:
         a = self._active.pop(aid)
-        self._event("clear", a, t, {"duration_s": t - a["since"]}, m)
+        duration = mono - self._raised_mono.pop(aid, mono)
+        self._event("clear", a, t, mono, {"duration_s": duration}, m)
 
-    def _event(self, action: str, a: dict[str, Any], t: float, extra: dict[str, Any],
-               m: dict[str, Any] | None = None) -> None:
+    def _event(self, action: str, a: dict[str, Any], t: float, mono: float,
+               extra: dict[str, Any], m: dict[str, Any] | None = None) -> None:
         rec = {"type": "alarm", "action": action, "id": a["id"], "name": a["name"],
                "column": a["column"], "value": a["value"], "limit": a["limit"],
                "seq": m.get("seq") if m else self.last_seq,
-               "t_s": t, "time_utc": _iso(t), **extra}
+               "t_s": t, "time_utc": _iso(t), "t_ns": round(t * 1e9),
+               "mono_ns": round(mono * 1e9), **extra}
         self.events.append(rec)
         if self.on_event is not None:
             self.on_event(rec)
@@ -322,25 +346,18 @@ def alarm_message(alarms: list[dict[str, Any]]) -> str:
 
 
 class EventLog:
-    """Alarm records appended to the open recording's event log ``<id>.events.jsonl``
-    (next to ``<id>.rdrlog`` and ``<id>.sync.jsonl``); a record with no recording open is
-    kept in memory only (:attr:`AlarmEngine.events`)."""
+    """Alarm records into the open recording's events ``<id>.events.jsonl`` (kind ``alarm``,
+    written by the recorder's writer thread: the caller, often the reader thread, never
+    touches the disk); a record with no recording open is kept in memory only
+    (:attr:`AlarmEngine.events`)."""
 
-    def __init__(self, directory: Path, current: Callable[[], str | None]) -> None:
-        self.dir, self.current = Path(directory), current
-        self.last_error: str | None = None
+    def __init__(self, recorder: Any) -> None:
+        self.recorder = recorder
 
     def __call__(self, record: dict[str, Any]) -> None:
-        rec_id = self.current()
-        if rec_id is None:
-            return
-        line = json.dumps({k: _clean(v) for k, v in {**record, "recording": rec_id}.items()},
-                          allow_nan=False)
-        try:
-            with open(self.dir / f"{rec_id}.events.jsonl", "a", encoding="utf-8") as f:
-                f.write(line + "\n")
-        except OSError as exc:
-            self.last_error = f"cannot write the event log of {rec_id}: {exc.strerror}"
+        fields = {k: _clean(v) for k, v in record.items() if k not in ("t_ns", "mono_ns")}
+        self.recorder.event("alarm", {**fields, "recording": self.recorder.current},
+                            t_ns=record["t_ns"], mono_ns=record["mono_ns"])
 
 
 def read_events(path: Path) -> list[dict[str, Any]]:
@@ -381,9 +398,12 @@ def attach_alarms(svc: Any) -> AlarmEngine:
         if publish is not None:
             publish(alarm_message(alarms))
 
-    engine = AlarmEngine(rules, builtin, on_change=on_change,
-                         on_event=EventLog(svc.recorder.dir, lambda: svc.recorder.current))
-    svc.live.processors.append(engine.feed)  # the live pipeline only: never a replay
+    engine = AlarmEngine(rules, builtin, on_change=on_change, on_event=EventLog(svc.recorder))
+
+    def feed(msgs: list[dict[str, Any]]) -> None:  # durations on the monotonic clock
+        engine.feed(msgs, mono_s=time.monotonic())
+
+    svc.live.processors.append(feed)  # the live pipeline only: never a replay
     return engine
 
 

@@ -57,7 +57,7 @@ class RunwayJob:
     frames_total: int | None = None
     result: dict[str, Any] | None = None
     error: str | None = None
-    created_unix_s: float = field(default_factory=time.time)
+    created_unix_s: float = field(default_factory=time.time)  # a label (wall clock)
     finished_unix_s: float | None = None
     cancel: threading.Event = field(default_factory=threading.Event, repr=False)
 
@@ -345,7 +345,7 @@ class RunwayJobs:
     def _finish(self, job: RunwayJob, state: str, error: str | None = None) -> None:
         """Final state; the uploaded file is removed (lock held)."""
         job.state, job.error = state, error
-        job.finished_unix_s = time.time()
+        job.finished_unix_s = time.time()  # a label (wall clock)
         try:
             os.unlink(job.video)
         except OSError:

@@ -28,6 +28,7 @@ from radar_io.errors import ConfigError, NotFoundError, ValidationError
 from radar_io.coordinates.transforms import load_site
 from radar_io.recording.recorder import Recorder
 from radar_io.service.calibrations import CalibrationStore
+from radar_io.service.clock import ClockSync
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
@@ -72,7 +73,9 @@ class ServiceState:
         self.recorder = Recorder(self.data_dir, self.spec, self.site, cfg.source,
                                  auto=cfg.auto_record, preroll_s=cfg.preroll_s,
                                  retry_s=cfg.retry_s,  # automatic recording: retry after a disk error
-                                 low_space_bytes=int(cfg.low_space_mb * (1 << 20)))
+                                 low_space_bytes=int(cfg.low_space_mb * (1 << 20)),
+                                 buffer_bytes=int(cfg.recording_buffer_mb * (1 << 20)))
+        self.clock_sync = ClockSync()
         self.archiver: Any = None  # RecordingArchiver when archive_dir is set (started in start())
         if cfg.archive_dir:
             try:
@@ -253,6 +256,7 @@ class ServiceState:
             st["archive"] = self.archiver.stats()
         st["storage"] = self.recorder.storage()  # free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
+        st["clock"] = {**self.recorder.clock_status(), "synchronized": self.clock_sync.get()}
         st["calibration"] = self.live.calibration.id
         st["calibration_error"] = self.calibrations.error  # unreadable active.json at start
         st["calibration_last_good"] = self.calibrations.last_good

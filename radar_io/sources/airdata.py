@@ -48,6 +48,7 @@ class AirDataReader:
         self.samples: deque[dict[str, Any]] = deque(maxlen=keep)
         self.shutter_events = 0
         self._seq = 0
+        self._last_mono: float | None = None  # monotonic time of the last sample (its age)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="can-airdata", daemon=True)
@@ -121,8 +122,9 @@ class AirDataReader:
 
         with self._lock:
             self._seq += 1
+            self._last_mono = time.monotonic()
             self.samples.append({
-                "air_seq": self._seq, "t_ns": time.time_ns(),
+                "air_seq": self._seq, "t_ns": time.time_ns(),  # a label
                 "aircraft_time_s": row.get("time_s"), "ias_mps": si("ias_kt", KT),
                 "pressure_altitude_m": si("pressure_altitude_ft", FT),
                 "pitch_deg": row.get("pitch_deg"), "roll_deg": row.get("roll_deg"),
@@ -141,8 +143,8 @@ class AirDataReader:
                 "last_error": self.last_error, "samples_received": self._seq,
                 "shutter_events": self.shutter_events,
                 "messages": d.messages, "unknown": d.unknown, "undecodable": d.undecodable,
-                "last_sample_age_s": (time.time_ns() - self.samples[-1]["t_ns"]) / 1e9
-                if self.samples else None}
+                "last_sample_age_s": time.monotonic() - self._last_mono
+                if self._last_mono is not None else None}
 
     def close(self) -> None:
         self._stop.set()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import json
 import os
 import time
 
@@ -63,19 +65,34 @@ def test_sync_edge_on_the_go_falling_frame_belongs_to_the_closing_recording(tmp_
     acq._process(b"".join(frames([SYNC, IDLE], seq0=2)), 2)  # GO falls as SYNC rises
     assert rec.current is None
     assert rec.sync_events[-1].recording == rid
+    rec.close()  # the writer thread has written the sync index and the events
     assert (rec.dir / f"{rid}.sync.jsonl").read_text().count("\n") == 1
+    lines = (rec.dir / f"{rid}.events.jsonl").read_text().splitlines()
+    kinds = [json.loads(x)["kind"] for x in lines]
+    assert kinds == ["go", "go", "sync"]  # rise, fall, then the edge on the falling frame
 
 
-def test_a_failing_disk_never_stops_decoding(tmp_path, spec):
+def test_a_failing_disk_never_stops_decoding(tmp_path, spec, monkeypatch):
     acq, rec, published = pipeline(tmp_path, spec)
     acq._process(b"".join(frames([GO, GO])), 1)
-    os.close(rec._writer._fd)  # the disk goes away under the open recording
+    rid = rec.current
+    wait_for(lambda: rec.committed_bytes(rid), what="the recording open")
+    real_write = os.write
+
+    def write(fd, data):  # the disk goes away under the open recording
+        if str(rec.dir) in os.readlink(f"/proc/self/fd/{fd}"):
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        return real_write(fd, data)
+
+    monkeypatch.setattr(os, "write", write)
     acq._process(b"".join(frames([GO, GO, GO], seq0=2)), 2)
     assert len(published) == 5  # every frame still decoded and published
-    st = acq.status()
-    assert st["recording_error"] and rec.current is None
+    wait_for(lambda: acq.status()["recording_error"], what="the write error reported")
+    assert rec.current == rid  # kept: its chunks wait in memory for the disk
     acq._process(b"".join(frames([GO], seq0=5)), 3)
     assert len(published) == 6
+    assert rec.buffer_status()["pending_bytes"] == 4 * spec.length
+    rec.close(timeout_s=0.5)
 
 
 def test_manual_start_during_a_go_recording_survives_the_go_fall(tmp_path, spec):

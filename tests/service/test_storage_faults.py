@@ -127,55 +127,87 @@ def test_manual_start_on_a_full_disk(tmp_path):
 
 
 def test_go_edge_on_a_full_disk_loses_no_live_frame_and_retries(tmp_path):
+    """GO rises while the disk is full: the recording starts there (its file cannot be
+    created yet), the chunks wait in memory, and when space is back the file holds every
+    frame from the pre-roll on."""
     svc = FaultyServe("sim://?go_delay_s=2", tmp_path, "retry_s = 0.5\n")
     try:
         svc.full(True)
         svc.wait_ready()
         st = wait_for(lambda: (s := svc.get("/api/status"))["go"] == 1 and s
                       ["recording_error"] and s, what="GO edge with a failed start")
-        assert "No space left" in st["recording_error"] and st["recording"] is None
+        assert "No space left" in st["recording_error"] and st["recording"]
         assert st["processing_errors"] == 0 and st["seq_gaps"] == 0
         seqs = track_seqs(svc)
         assert contiguous(seqs)  # every frame reached the live stream, the GO edge's too
-        assert list(svc.recdir.glob("*.rdrlog")) == []
+        go_seq = next(m["seq"] for m in svc.get("/api/track?limit=20000")["messages"] if m["go"])
         time.sleep(1.2)  # retried twice meanwhile, still full
-        errors = svc.get("/api/status")["storage"]["errors"]
-        assert errors >= 3
+        st = svc.get("/api/status")
+        assert st["storage"]["errors"] >= 3 and st["storage"]["buffer"]["pending_bytes"] > 0
         svc.full(False)
-        st = wait_for(lambda: (s := svc.get("/api/status"))["recording"] and s, what="retry")
-        assert st["recording_error"] is None
+        st = wait_for(lambda: (s := svc.get("/api/status"))["recording_error"] is None
+                      and s["storage"]["buffer"]["pending_bytes"] == 0 and s, what="retry")
         rec = svc.recdir / f"{st['recording']}.rdrlog"
-        time.sleep(0.5)
         seqs, torn = frames_of(rec)
-        assert contiguous(seqs) and len(seqs) > 400
+        assert contiguous(seqs) and seqs[0] < go_seq and len(seqs) > 2000  # pre-roll on
+        assert st["storage"]["buffer"]["overflow_chunks"] == 0
     finally:
         svc.stop()
 
 
 def test_disk_fills_mid_recording(tmp_path):
+    """3 s of ENOSPC, then space back: the recording and a websocket client miss no frame."""
+    import asyncio
+
+    import websockets
+
     svc = FaultyServe("sim://", tmp_path, "auto_record = \"always\"\nretry_s = 0.5\n")
     try:
-        st = svc.wait_ready()
+        svc.wait_ready()
         first = wait_for(lambda: svc.get("/api/status")["recording"], what="recording")
-        time.sleep(1.0)
-        svc.full(True)
-        st = wait_for(lambda: (s := svc.get("/api/status"))["recording_error"] and s,
-                      what="the write error")
-        assert "cannot write recording" in st["recording_error"]
-        assert "No space left" in st["storage"]["last_error"]
-        assert st["recording"] is None
-        # what was recorded before the disk filled is intact: whole chunks, no torn tail
-        seqs, torn = frames_of(svc.recdir / f"{first}.rdrlog")
-        assert len(seqs) > 800 and contiguous(seqs) and torn == 0
-        time.sleep(1.0)
+        got: list[int] = []
+        stop = asyncio.Event()
+
+        async def client() -> None:
+            async with websockets.connect(svc.base.replace("http", "ws") + "/ws/live?batch=1",
+                                          max_size=None) as ws:
+                while not stop.is_set():
+                    try:
+                        doc = json.loads(await asyncio.wait_for(ws.recv(), 0.2))
+                    except asyncio.TimeoutError:
+                        continue
+                    got.extend(m["seq"] for m in (doc if isinstance(doc, list) else [doc])
+                               if "seq" in m)
+
+        async def main() -> dict:
+            task = asyncio.create_task(client())
+            await asyncio.sleep(1.0)
+            svc.full(True)
+            st = await asyncio.to_thread(wait_for, lambda: (s := svc.get("/api/status"))
+                                         ["recording_error"] and s, what="the write error")
+            await asyncio.sleep(3.0)
+            svc.full(False)
+            st = await asyncio.to_thread(
+                wait_for, lambda: (s := svc.get("/api/status"))["recording_error"] is None
+                and s["storage"]["buffer"]["pending_bytes"] == 0 and s, what="written")
+            await asyncio.sleep(0.5)
+            stop.set()
+            await task
+            return st
+
+        full_st = asyncio.run(main())
+        assert full_st["recording"] == first  # the same recording went on
+        assert svc.post("/api/recordings/stop")[1]["closed"] == first
         st = svc.get("/api/status")
-        assert st["processing_errors"] == 0 and st["seq_gaps"] == 0 and st["rate_hz"] > 500
-        svc.full(False)
-        st = wait_for(lambda: (s := svc.get("/api/status"))["recording"] and s,
-                      what="recording again")
-        assert st["recording"] != first and st["recording_error"] is None
-        print(f"\nmid-recording ENOSPC: {len(seqs)} frames kept in {first}, new recording "
-              f"{st['recording']} after space came back")
+        assert "No space left" in st["storage"]["last_error"]
+        assert st["processing_errors"] == 0 and st["seq_gaps"] == 0
+        assert st["storage"]["buffer"]["overflow_chunks"] == 0
+        seqs, torn = frames_of(svc.recdir / f"{first}.rdrlog")
+        assert contiguous(seqs) and torn == 0 and len(seqs) > 4000
+        assert contiguous(got) and len(got) > 4000
+        assert got[0] in seqs and got[-1] in seqs  # the websocket's span is all recorded
+        print(f"\n3 s of ENOSPC mid-recording: {len(seqs)} frames in {first}, contiguous; "
+              f"websocket {len(got)} frames, contiguous; {st['storage']['errors']} disk errors")
     finally:
         svc.stop()
 
@@ -244,8 +276,9 @@ def test_twenty_downloads_of_an_open_recording(tmp_path):
 
 
 def test_kill_9_while_recording_loses_no_frame(tmp_path):
-    """Frames written into a pty, all decoded by the service (hence recorded: raw bytes go
-    to disk before decoding), then kill -9: the recording holds every one, 3 times."""
+    """Frames written into a pty, all decoded by the service and handed to the kernel by
+    its writer thread (nothing pending), then kill -9: the recording holds every one, 3
+    times."""
     counts = []
     for run in range(3):
         pty = Pty()
@@ -262,6 +295,9 @@ def test_kill_9_while_recording_loses_no_frame(tmp_path):
                 pty.write(data[k:k + 2400])
                 time.sleep(0.1)
             wait_for(lambda: svc.get("/api/status")["frames"] == n, what="all frames decoded")
+            # handed to the kernel by the writer thread (the reader only queues them)
+            wait_for(lambda: svc.get("/api/status")["storage"]["buffer"]["pending_bytes"] == 0,
+                     what="all chunks written")
             assert svc.get("/api/status")["recording"]
             os.kill(svc.proc.pid, signal.SIGKILL)
             svc.proc.wait()
