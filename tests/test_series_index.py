@@ -12,8 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radar_io.analysis.series import (FANOUT, SeriesIndex, SeriesOptions, index_dir,
-                                      range_min_max)
+from radar_io.analysis.series import (
+    FANOUT,
+    SeriesIndex,
+    SeriesOptions,
+    index_dir,
+    range_min_max,
+)
 from radar_io.coordinates.reference_path import add_deviation, load_path
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.batch_decoder import decode_bytes
@@ -134,7 +139,7 @@ def test_answers_equal_numpy_min_max_over_the_same_buckets(flight, start_s, end_
 
 def test_ranges_of_every_shape_against_the_pyramid(flight):
     """Random row ranges, from empty to the whole column, through range_min_max directly."""
-    rec, _, options, t, cols = flight
+    rec, _, options, _, cols = flight
     idx = SeriesIndex(rec, options)
     man = idx.update()
     _, levels = idx._open(man, ["h_m", "seq"])
@@ -236,7 +241,7 @@ def test_stale_index_is_rebuilt_and_a_grown_file_extended(flight, tmp_path, spec
 @pytest.mark.parametrize("damage", ["manifest", "truncate", "header", "missing", "level",
                                     "events"])
 def test_damaged_index_is_rebuilt(flight, tmp_path, damage):
-    rec, chunks, options, t, cols = flight
+    rec, _, options, t, cols = flight
     local = tmp_path / rec.name
     local.write_bytes(rec.read_bytes())
     SeriesIndex(local, options).events()
@@ -291,7 +296,7 @@ def test_empty_recording_and_block_boundaries(spec, tmp_path, monkeypatch):
     answer = SeriesIndex(empty, options).series(["h_m"])
     assert answer["frames"] == 0 and answer["t_s"] == [] and answer["columns"]["h_m"]["min"] == []
     # tiny build blocks: frames and pyramid blocks straddle every boundary
-    import radar_io.analysis.series as series
+    from radar_io.analysis import series
 
     monkeypatch.setattr(series, "BLOCK_BYTES", 1000)
     chunks = simulated_chunks(spec, 3.0, seed=9)

@@ -115,7 +115,7 @@ def _sha(data: bytes) -> str:
 # -- .npy files that grow ----------------------------------------------------------------
 def _npy_header(dtype: np.dtype[Any], shape: tuple[int, ...]) -> bytes:
     """A version-1.0 NPY header of exactly :data:`HEADER_BYTES` bytes."""
-    text = "{'descr': %r, 'fortran_order': False, 'shape': %r, }" % (dtype.str, shape)
+    text = f"{{'descr': {dtype.str!r}, 'fortran_order': False, 'shape': {shape!r}, }}"
     body = text.ljust(HEADER_BYTES - 10 - 1) + "\n"
     return b"\x93NUMPY\x01\x00" + struct.pack("<H", len(body)) + body.encode("latin1")
 
@@ -125,13 +125,13 @@ class _Growing:
 
     def __init__(self, path: Path, dtype: np.dtype[Any], width: int, rows: int) -> None:
         self.path, self.dtype, self.width, self.rows = path, dtype, width, rows
-        self.f = open(path, "r+b" if path.exists() else "w+b")
+        self.f = open(path, "r+b" if path.exists() else "w+b")  # noqa: SIM115 - kept open
         self.f.seek(HEADER_BYTES + rows * width * dtype.itemsize)
         self.f.truncate()  # whatever an interrupted append left after the committed rows
 
     def append(self, a: np.ndarray) -> None:
         a = np.ascontiguousarray(a, dtype=self.dtype)
-        self.f.write(memoryview(a).cast("B"))
+        self.f.write(a.data)
         self.rows += a.shape[0]
 
     def finish(self) -> None:
@@ -190,7 +190,7 @@ class _Writer:
         self.files: dict[tuple[str, int], _Growing] = {}
         self.carry: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self.row_bytes = sum(dt.itemsize for dt in dtypes.values()) * (FANOUT + 2) / FANOUT
-        self._events = open(directory / "events.jsonl", "a+b")
+        self._events = open(directory / "events.jsonl", "a+b")  # noqa: SIM115 - kept open
         try:
             self._open_files(events)
         except BaseException:
@@ -207,7 +207,7 @@ class _Writer:
         counts = level_rows(rows)
         for name, dt in self.dtypes.items():
             self.files[(name, 0)] = _Growing(directory / f"{name}.npy", dt, 1, rows)
-            carry = []
+            carry: list[tuple[np.ndarray, np.ndarray]] = []
             if name == TIME_COLUMN:
                 self.carry[name] = carry
                 continue
@@ -238,7 +238,7 @@ class _Writer:
                                f"{need} needed (keeping {self.reserve_bytes} for recording)",
                                errno=errno.ENOSPC)
         try:
-            for name, dt in self.dtypes.items():
+            for name in self.dtypes:
                 v = cols[name]
                 self.files[(name, 0)].append(v)
                 if name != TIME_COLUMN:
@@ -529,7 +529,8 @@ class SeriesIndex:
         from radar_io.decoding.model import DecodeModel
 
         model = DecodeModel(self.options.spec, site=self.options.site)
-        out = {c: np.dtype(model.dtype(c)) for c in self._columns if c in model.columns}
+        out: dict[str, np.dtype[Any]] = {c: np.dtype(model.dtype(c)) for c in self._columns
+                                         if c in model.columns}
         if self.options.path is not None:
             out.update(dy_m=np.dtype("<f8"), dz_m=np.dtype("<f8"), along_m=np.dtype("<f8"),
                        leg=np.dtype("<i8"))

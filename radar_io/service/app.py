@@ -38,8 +38,18 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     """The service app for ``cfg``; refuses a configuration that can never work
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
     from radar_io.service.alarms import attach_alarms, status_loop
-    from radar_io.service.routers import (alarms, calibration, coordinates, live, recordings,
-                                          replay, report, runway, series, status)
+    from radar_io.service.routers import (
+        alarms,
+        calibration,
+        coordinates,
+        live,
+        recordings,
+        replay,
+        report,
+        runway,
+        series,
+        status,
+    )
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     state = ServiceState(cfg)

@@ -27,7 +27,7 @@ log = logging.getLogger("radar_io.series")
 class LookBack:
     """Indexes of the service's recordings, and the worker that builds them on close."""
 
-    def __init__(self, state: "ServiceState") -> None:
+    def __init__(self, state: ServiceState) -> None:
         self.state = state
         self.built = 0
         self.errors = 0

@@ -12,13 +12,19 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
+from test_series_index import (
+    PATH_FILE,
+    check,
+    expected,
+    reference,
+    simulated_chunks,
+    write_recording,
+)
 
 from radar_io.analysis.series import SeriesOptions, index_dir
 from radar_io.coordinates.reference_path import load_path
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.biases import Calibration
-from test_series_index import PATH_FILE, check, expected, reference, simulated_chunks, \
-    write_recording
 
 from .liveserver import TOKEN, live_server, service_config
 
