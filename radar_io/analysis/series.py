@@ -258,7 +258,9 @@ class _Writer:
             carry.append((mins[:0], maxs[:0]))
         cm, cx = carry[lvl]
         if cm.size:
-            mins, maxs = np.concatenate([cm, mins]), np.concatenate([cx, maxs])
+            same = mins is maxs  # level 0: one array for both
+            mins = np.concatenate([cm, mins])
+            maxs = mins if same else np.concatenate([cx, maxs])
         k = mins.size // FANOUT
         carry[lvl] = (mins[k * FANOUT:].copy(), maxs[k * FANOUT:].copy())
         if not k:
@@ -549,10 +551,11 @@ class SeriesIndex:
             raise StorageError(f"cannot create look-back index {tmp}: {exc.strerror}",
                                errno=exc.errno) from exc
         try:
-            t = time.perf_counter()
+            t, cpu = time.perf_counter(), time.thread_time()
             state = _State()
             man = self._scan(tmp, state, self._dtypes(), 0, 0, size)
-            man["build_s"] = {**man.pop("scan_s"), "total": time.perf_counter() - t}
+            man["build_s"] = {**man.pop("scan_s"), "total": time.perf_counter() - t,
+                              "cpu": time.thread_time() - cpu}
             self._write_manifest(tmp, man)
             if self.dir.exists():
                 old = parent / f".{self.dir.name}.old-{uuid.uuid4().hex[:8]}"

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -44,12 +45,17 @@ def _rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def _get(base: str, path: str) -> tuple[float, dict[str, Any]]:
-    """(seconds, JSON body) of one GET, timed on the monotonic clock."""
+def _get(base: str, path: str) -> tuple[float, float, dict[str, Any]]:
+    """(seconds, the server's CPU seconds from its Server-Timing header, JSON body) of one
+    GET, timed on the monotonic clock."""
     t = time.perf_counter()
     with urllib.request.urlopen(base + path, timeout=600) as r:
         body = r.read()
-    return time.perf_counter() - t, json.loads(body)
+        timing = r.headers.get("Server-Timing", "")
+    wall = time.perf_counter() - t
+    cpu = next((float(part.split("dur=")[1]) / 1e3 for part in timing.split(",")
+                if part.strip().startswith("cpu;")), float("nan"))
+    return wall, cpu, json.loads(body)
 
 
 def reference_columns(rec: Path, path_file: Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -125,26 +131,30 @@ def run(hours: float = 1.0, queries: int = 50, points: int = 1000, seed: int = 1
         with ServeProcess("sim://", tmp / "data", extra=("--config", str(cfg))) as srv:
             pid = srv.proc.pid
             res["rss_before_mb"] = _rss_mb(pid)
+            res["load_before"] = os.getloadavg()[0]
             url = f"/api/recordings/hour/series?columns={','.join(COLUMNS)}&points={points}"
-            res["first_query_s"], first = _get(srv.base, url)
+            res["first_query_s"], res["first_query_cpu_s"], first = _get(srv.base, url)
             duration = first["end_s"]
             answers.append((0.0, duration, first))
             rng = np.random.default_rng(seed)
-            times = []
+            times, cpus = [], []
             for _ in range(queries):
                 width = float(10 ** rng.uniform(np.log10(0.01), np.log10(duration)))
                 start = float(rng.uniform(0.0, duration - width))
-                s, body = _get(srv.base, f"{url}&start_s={start!r}&end_s={start + width!r}")
+                s, cpu, body = _get(srv.base, f"{url}&start_s={start!r}&end_s={start + width!r}")
                 times.append(s)
+                cpus.append(cpu)
                 answers.append((start, start + width, body))
             res["rss_after_mb"] = _rss_mb(pid)
+            res["load_after"] = os.getloadavg()[0]
         man = json.loads((rec.with_suffix(".series") / "manifest.json").read_text())
         res["frames"] = man["rows"]
         res["index_mb"] = sum(p.stat().st_size for p in rec.with_suffix(".series").iterdir()) / 1e6
         res["build_s"] = man["build_s"]
-        q = np.array(times) * 1e3
-        res["query_ms"] = {"p50": float(np.percentile(q, 50)), "p95": float(np.percentile(q, 95)),
-                           "max": float(q.max())}
+        for key, values in (("query_ms", times), ("query_cpu_ms", cpus)):
+            q = np.array(values) * 1e3
+            res[key] = {"p50": float(np.percentile(q, 50)), "p95": float(np.percentile(q, 95)),
+                        "max": float(q.max())}
         res["decimated"] = sum(1 for _, _, b in answers if b["decimated"])
         res["max_values_per_column"] = max(len(b["columns"][c]["min"]) + len(b["columns"][c]["max"])
                                            for _, _, b in answers for c in COLUMNS)
@@ -169,17 +179,19 @@ def run(hours: float = 1.0, queries: int = 50, points: int = 1000, seed: int = 1
 
 def report(res: dict[str, Any]) -> str:
     b = res["build_s"]
-    q = res["query_ms"]
+    q, c = res["query_ms"], res["query_cpu_ms"]
     return (
         f"look-back: {res['hours']} h recording ({res['frames']:,} frames, "
         f"{res['recording_mb']:.0f} MB; index {res['index_mb']:.0f} MB), columns "
-        f"{','.join(COLUMNS)}, points={res['points']}, over HTTP\n"
-        f"  first query (index build) {res['first_query_s']:.2f} s (goal <= 10 s): build "
-        f"{b['total']:.2f} s = read {b['read']:.2f} + frame {b['frame']:.2f} + decode "
-        f"{b['decode']:.2f} + deviation/events {b['deviation']:.2f} + write/pyramid "
-        f"{b['write']:.2f} s\n"
+        f"{','.join(COLUMNS)}, points={res['points']}, over HTTP; load average "
+        f"{res['load_before']:.1f} before, {res['load_after']:.1f} after\n"
+        f"  first query (index build) {res['first_query_s']:.2f} s wall (goal <= 10 s), "
+        f"{res['first_query_cpu_s']:.2f} s CPU: build {b['total']:.2f} s = read "
+        f"{b['read']:.2f} + frame {b['frame']:.2f} + decode {b['decode']:.2f} + "
+        f"deviation/events {b['deviation']:.2f} + write/pyramid {b['write']:.2f} s\n"
         f"  {res['queries']} random ranges 10 ms .. whole ({res['decimated'] - 1} decimated): "
-        f"p50 {q['p50']:.1f} ms, p95 {q['p95']:.1f} ms (goal <= 100 ms), max {q['max']:.1f} ms\n"
+        f"p50 {q['p50']:.1f} ms, p95 {q['p95']:.1f} ms (goal <= 100 ms), max {q['max']:.1f} ms "
+        f"wall; server CPU p50 {c['p50']:.1f}, p95 {c['p95']:.1f}, max {c['max']:.1f} ms\n"
         f"  at most {res['max_values_per_column']} values per column (limit "
         f"{2 * res['points']}); {res['answers_equal']}/{res['answers']} answers equal to numpy "
         f"min/max over decode_bytes; service RSS {res['rss_before_mb']:.0f} MB before, "

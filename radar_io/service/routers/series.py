@@ -5,6 +5,7 @@ column and the recording's events, from the recording's look-back index
 from __future__ import annotations
 
 import json
+import time
 from typing import Any
 
 from fastapi import APIRouter, Depends, Path, Query
@@ -50,9 +51,13 @@ class EventsAnswer(BaseModel):
     events: list[Event]
 
 
-def _json(doc: dict[str, Any]) -> Response:
-    return Response(json.dumps(doc, separators=(",", ":"), allow_nan=False),
-                    media_type="application/json")
+def _json(doc: dict[str, Any], t0: float, cpu0: float) -> Response:
+    """The JSON answer, with its cost in a ``Server-Timing`` header: ``total`` (wall ms,
+    index update included) and ``cpu`` (this worker thread's CPU ms)."""
+    body = json.dumps(doc, separators=(",", ":"), allow_nan=False)
+    timing = (f"total;dur={(time.perf_counter() - t0) * 1e3:.2f}, "
+              f"cpu;dur={(time.thread_time() - cpu0) * 1e3:.2f}")
+    return Response(body, media_type="application/json", headers={"Server-Timing": timing})
 
 
 @router.get("/api/recordings/{rec_id}/series", dependencies=EXPENSIVE, response_model=None,
@@ -73,8 +78,9 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     [start, next start), the last one closed), `t_s` their starts, min / max over the
     non-null samples of each (null: no value). Otherwise every frame (min = max). The
     first query of a recording builds its index (docs/lookback.md)."""
+    t0, cpu0 = time.perf_counter(), time.thread_time()
     idx, end = state.lookback.index(rec_id)
-    return _json(idx.series(columns.split(","), start_s, end_s, points, end=end))
+    return _json(idx.series(columns.split(","), start_s, end_s, points, end=end), t0, cpu0)
 
 
 @router.get("/api/recordings/{rec_id}/events", dependencies=EXPENSIVE, response_model=None,
@@ -84,5 +90,6 @@ def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     """GO edges (`go_rise`, `go_fall`) and SYNC 0→1 edges (`sync`, with `seq`, `tod_s`) of a
     recording, and the records of its event log (alarms, clock steps, annotations), by
     time on the series' axis."""
+    t0, cpu0 = time.perf_counter(), time.thread_time()
     idx, end = state.lookback.index(rec_id)
-    return _json({"events": idx.events(end=end)})
+    return _json({"events": idx.events(end=end)}, t0, cpu0)
