@@ -58,6 +58,12 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
         status, body = get(srv.base, "/api/recordings/flight/series?columns=h_m&start_s=4&end_s=4.1")
         assert body["decimated"] is False and body["frames"] == len(body["t_s"]) > 50
 
+        with open(index_dir(recs / "flight.rdrlog") / "h_m.1.npy", "r+b") as f:
+            f.truncate(100)  # a damaged index file: rebuilt, answered as before
+        status, again = get(srv.base, "/api/recordings/flight/series?columns=h_m&points=77")
+        assert status == 200
+        check(again, expected(t, cols, ["h_m"], None, None, 77), 77)
+
         status, body = get(srv.base, "/api/recordings/flight/events")
         assert status == 200
         kinds = [e["kind"] for e in body["events"]]
