@@ -37,14 +37,6 @@ PATH_NAME = "demo_track_radar.toml"
 COLUMNS = ("h_m", "dy_m")
 
 
-def _rss_mb(pid: int) -> float:
-    with open(f"/proc/{pid}/status", encoding="ascii") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    return float("nan")
-
-
 def _get(base: str, path: str) -> tuple[float, float, dict[str, Any]]:
     """(seconds, the server's CPU seconds from its Server-Timing header, JSON body) of one
     GET, timed on the monotonic clock."""
@@ -111,7 +103,7 @@ def _same(got: list[float | None], want: np.ndarray) -> bool:
 def run(hours: float = 1.0, queries: int = 50, points: int = 1000, seed: int = 19,
         workdir: str | None = None) -> dict[str, Any]:
     from radar_io.benchmarks.outputs import make_recording
-    from radar_io.benchmarks.service_load import ServeProcess
+    from radar_io.benchmarks.service_load import ServeProcess, rss_mb
     from radar_io.wirespec.frame import spec_dir
 
     tmp = Path(workdir or tempfile.mkdtemp(prefix="radar-io-bench-lookback-"))
@@ -130,7 +122,7 @@ def run(hours: float = 1.0, queries: int = 50, points: int = 1000, seed: int = 1
         answers: list[tuple[float, float, dict[str, Any]]] = []
         with ServeProcess("sim://", tmp / "data", extra=("--config", str(cfg))) as srv:
             pid = srv.proc.pid
-            res["rss_before_mb"] = _rss_mb(pid)
+            res["rss_before_mb"] = rss_mb(pid)
             res["load_before"] = os.getloadavg()[0]
             url = f"/api/recordings/hour/series?columns={','.join(COLUMNS)}&points={points}"
             res["first_query_s"], res["first_query_cpu_s"], first = _get(srv.base, url)
@@ -145,7 +137,7 @@ def run(hours: float = 1.0, queries: int = 50, points: int = 1000, seed: int = 1
                 times.append(s)
                 cpus.append(cpu)
                 answers.append((start, start + width, body))
-            res["rss_after_mb"] = _rss_mb(pid)
+            res["rss_after_mb"] = rss_mb(pid)
             res["load_after"] = os.getloadavg()[0]
         man = json.loads((rec.with_suffix(".series") / "manifest.json").read_text())
         res["frames"] = man["rows"]
