@@ -3,9 +3,10 @@ recording, decoded with the live calibration, site and reference path.
 
 An index is made on the first query, or when a recording closes (``Recorder.on_closed``:
 :meth:`LookBack.submit`, built by one worker thread, off the reader thread); a recording
-still being written is indexed up to its last whole chunk (``committed_bytes``) and
-extended at each query. The index never takes the last ``low_space_mb`` of the disk: that
-room is the live recording's.
+still being written is indexed up to its last whole chunk (``committed_bytes``), extended
+by the same worker every :attr:`LookBack.refresh_s` and at each query, so a look at a long
+flight in progress never waits for a whole build. The index never takes the last
+``low_space_mb`` of the disk: that room is the live recording's.
 """
 
 from __future__ import annotations
@@ -23,6 +24,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("radar_io.series")
 
+#: default :attr:`LookBack.refresh_s`: 10 s of a 1 kHz recording is 10 000 frames to index
+REFRESH_S = 10.0
+
 
 class LookBack:
     """Indexes of the service's recordings, and the worker that builds them on close."""
@@ -34,6 +38,8 @@ class LookBack:
         self.last_error: str | None = None
         self._q: queue.Queue[Path | None] = queue.Queue()
         self._thread: threading.Thread | None = None
+        #: seconds between two extensions of the open recording's index
+        self.refresh_s = REFRESH_S
 
     def options(self) -> SeriesOptions:
         """Spec, the calibration live now, site and reference path of the service."""
@@ -58,15 +64,33 @@ class LookBack:
             self._q.put_nowait(path)
 
     def _run(self) -> None:
-        while (path := self._q.get()) is not None:
+        while True:
             try:
-                SeriesIndex(path, self.options(),
-                            reserve_bytes=self.state.recorder.low_space_bytes).update()
+                path = self._q.get(timeout=self.refresh_s)
+            except queue.Empty:  # extend the index of the recording being written
+                rec_id = self.state.recorder.current
+                if rec_id is not None:
+                    self._update(self.state.recorder.dir / f"{rec_id}.rdrlog",
+                                 self.state.recorder.committed_bytes(rec_id))
+                continue
+            if path is None:
+                return
+            if self._update(path, None):
                 self.built += 1
-            except Exception as exc:  # noqa: BLE001 - a failed index never stops the next
-                self.errors += 1
-                self.last_error = f"{path.name}: {exc}"
-                log.warning("look-back index of %s failed: %s", path.name, exc)
+
+    def _update(self, path: Path, end: int | None) -> bool:
+        """Bring one index up to date; failures are counted and logged (once per message)."""
+        try:
+            SeriesIndex(path, self.options(),
+                        reserve_bytes=self.state.recorder.low_space_bytes).update(end)
+            return True
+        except Exception as exc:  # noqa: BLE001 - a failed index never stops the next
+            self.errors += 1
+            msg = f"{path.name}: {exc}"
+            if msg != self.last_error:
+                log.warning("look-back index of %s", msg)
+            self.last_error = msg
+            return False
 
     def stats(self) -> dict[str, Any]:
         return {"built": self.built, "errors": self.errors, "pending": self._q.qsize(),

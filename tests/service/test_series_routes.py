@@ -26,7 +26,7 @@ from radar_io.coordinates.reference_path import load_path
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.biases import Calibration
 
-from .liveserver import TOKEN, live_server, service_config
+from .liveserver import TOKEN, LiveServer, live_server, service_config
 
 
 def get(base: str, path: str) -> tuple[int, dict]:
@@ -87,11 +87,20 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
 
 def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_path):
     cfg = service_config(tmp_path / "svc", auto_record="manual")
-    with live_server(cfg) as srv:
+    srv = LiveServer(cfg)
+    srv.app.state.service.lookback.refresh_s = 0.2
+    try:
+        srv.start()
         srv.wait_connected()
         status, body = srv.request("POST", "/api/recordings/start", token=TOKEN)
         assert status == 200
         rec = body["recording"]
+        path = Path(cfg.data_dir) / "recordings" / f"{rec}.rdrlog"
+        man = index_dir(path) / "manifest.json"
+        deadline = time.monotonic() + 30
+        while not (man.exists() and json.loads(man.read_text())["rows"] > 500):
+            assert time.monotonic() < deadline, "the open recording was not indexed"
+            time.sleep(0.1)  # no query yet: the service's worker keeps the index current
         frames = []
         for _ in range(3):
             time.sleep(1.0)
@@ -99,10 +108,8 @@ def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_pat
             assert status == 200, body
             frames.append(body["frames"])
             assert body["decimated"] is (body["frames"] > 50)
-        assert 0 < frames[0] < frames[1] < frames[2]
-        path = Path(cfg.data_dir) / "recordings" / f"{rec}.rdrlog"
+        assert 500 < frames[0] < frames[1] < frames[2]
         assert srv.request("POST", "/api/recordings/stop", token=TOKEN)[0] == 200
-        man = index_dir(path) / "manifest.json"
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:  # the service's worker indexes the closed file
             if man.exists() and json.loads(man.read_text())["recording"]["scanned_bytes"] \
@@ -114,3 +121,5 @@ def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_pat
         status, body = get(srv.base, f"/api/recordings/{rec}/series?columns=h_m&points=50")
         assert body["frames"] > frames[2]
         assert np.all(np.diff(body["t_s"]) > 0)
+    finally:
+        srv.stop()
