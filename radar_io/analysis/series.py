@@ -528,14 +528,26 @@ class SeriesIndex:
         return ""
 
     def _dtypes(self) -> dict[str, np.dtype[Any]]:
-        from radar_io.decoding.model import DecodeModel
+        """The dtype each column is stored in: the narrowest that holds every value the
+        decoder can give it exactly (a word's values as float32 when its whole value
+        table is exact in float32, 16-bit words as 16-bit integers), else the decoder's."""
+        from radar_io.decoding.model import DecodeModel, value_table
 
         model = DecodeModel(self.options.spec, site=self.options.site)
         out: dict[str, np.dtype[Any]] = {c: np.dtype(model.dtype(c)) for c in self._columns
                                          if c in model.columns}
+        for f in model.fields:
+            if f.bits > 16 or f.column not in out:
+                continue
+            if model.is_scaled(f):
+                table = value_table(f)
+                if np.array_equal(table.astype(np.float32).astype(np.float64), table):
+                    out[f.column] = np.dtype("<f4")
+            elif out[f.column].kind in "iu":
+                out[f.column] = np.dtype("<i2" if f.is_signed else "<u2")
         if self.options.path is not None:
             out.update(dy_m=np.dtype("<f8"), dz_m=np.dtype("<f8"), along_m=np.dtype("<f8"),
-                       leg=np.dtype("<i8"))
+                       leg=np.dtype("<i4"))
         out[TIME_COLUMN] = np.dtype("<f8")
         return {c: out[c] for c in [*self._columns, TIME_COLUMN]}
 
