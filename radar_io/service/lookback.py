@@ -55,6 +55,16 @@ class LookBack:
 
     # -- built when a recording closes -----------------------------------------------------
     def start(self) -> None:
+        """Start the worker and hook it onto ``Recorder.on_closed`` (after what is already
+        there, e.g. the archiver: both are called)."""
+        before = self.state.recorder.on_closed
+
+        def closed(path: Path) -> None:
+            if before is not None:
+                before(path)
+            self.submit(path)
+
+        self.state.recorder.on_closed = closed
         self._thread = threading.Thread(target=self._run, name="series-index", daemon=True)
         self._thread.start()
 

@@ -3,8 +3,8 @@
 Built once by :func:`radar_io.service.app.build_app` (everything that can be refused
 is refused here, before the server binds), started and stopped by the app's lifespan
 (:meth:`ServiceState.start`, :meth:`ServiceState.stop`): the reader thread, the sink
-workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver, the look-back
-indexer and the CAN air-data reader. Nothing opens a file, a device or a connection before ``start``.
+workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver and the CAN
+air-data reader. Nothing opens a file, a device or a connection before ``start``.
 """
 
 from __future__ import annotations
@@ -75,9 +75,6 @@ class ServiceState:
                 raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
                                   f"{exc.strerror}") from exc
         self.runway_jobs: Any = None  # RunwayJobs, created by the runway router on first use
-        from radar_io.service.lookback import LookBack
-
-        self.lookback = LookBack(self)  # look-back indexes (routers/series.py)
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
@@ -148,16 +145,8 @@ class ServiceState:
             from radar_io.service.archiver import RecordingArchiver
 
             self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options)
-        self.lookback.start()
-        self.recorder.on_closed = self._recording_closed
+            self.recorder.on_closed = self.archiver.submit
         self.acq.start()
-
-    def _recording_closed(self, path: Path) -> None:
-        """A recording closed cleanly: archive it (when configured) and index it for
-        look-back; both queue the work for their own thread."""
-        if self.archiver is not None:
-            self.archiver.submit(path)
-        self.lookback.submit(path)
 
     def _archive_options(self) -> dict[str, Any]:
         """What a closed recording is archived with: the live site, spec, calibration, path."""
@@ -167,8 +156,7 @@ class ServiceState:
     def stop(self) -> None:
         """Stop the reader, close the recording, finish archiving, cancel runway jobs, stop
         the sinks, the MQTT publisher and the air-data reader — each even if one fails."""
-        steps = [("reader", self.acq.stop), ("recorder", self.recorder.close),
-                 ("look-back index", self.lookback.close)]
+        steps = [("reader", self.acq.stop), ("recorder", self.recorder.close)]
         if self.archiver is not None:  # finishes the recording just closed
             steps.append(("archiver", self.archiver.close))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files

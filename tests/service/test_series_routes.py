@@ -88,7 +88,7 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
 def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_path):
     cfg = service_config(tmp_path / "svc", auto_record="manual")
     srv = LiveServer(cfg)
-    srv.app.state.service.lookback.refresh_s = 0.2
+    srv.app.state.lookback.refresh_s = 0.2
     try:
         srv.start()
         srv.wait_connected()

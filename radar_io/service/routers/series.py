@@ -11,10 +11,11 @@ from typing import Any
 from fastapi import APIRouter, Depends, Path, Query
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.requests import HTTPConnection
 
 from radar_io.service.errors import responses
-from radar_io.service.routers.deps import get_state
-from radar_io.service.state import ID_PATTERN, ServiceState
+from radar_io.service.lookback import LookBack
+from radar_io.service.state import ID_PATTERN
 
 router = APIRouter(tags=["recordings"])
 
@@ -51,6 +52,11 @@ class EventsAnswer(BaseModel):
     events: list[Event]
 
 
+def get_lookback(conn: HTTPConnection) -> LookBack:
+    """The look-back indexes of the app serving this request."""
+    return conn.app.state.lookback  # type: ignore[no-any-return]
+
+
 def _json(doc: dict[str, Any], t0: float, cpu0: float) -> Response:
     """The JSON answer, with its cost in a ``Server-Timing`` header: ``total`` (wall ms,
     index update included) and ``cpu`` (this worker thread's CPU ms)."""
@@ -70,7 +76,7 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
            end_s: float | None = Query(None, ge=0.0, allow_inf_nan=False,
                                        description="range end, s (default: the last frame)"),
            points: int = Query(1000, ge=1, le=10000, description="buckets"),
-           state: ServiceState = Depends(get_state)) -> Response:
+           lookback: LookBack = Depends(get_lookback)) -> Response:
     """Min / max of columns over a time range of a recording (closed, or still being written:
     up to its last whole chunk). Time: seconds since the recording's first chunk on the
     monotonic receive time; each frame has the time of the chunk that completed it. More
@@ -79,17 +85,17 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     non-null samples of each (null: no value). Otherwise every frame (min = max). The
     first query of a recording builds its index (docs/lookback.md)."""
     t0, cpu0 = time.perf_counter(), time.thread_time()
-    idx, end = state.lookback.index(rec_id)
+    idx, end = lookback.index(rec_id)
     return _json(idx.series(columns.split(","), start_s, end_s, points, end=end), t0, cpu0)
 
 
 @router.get("/api/recordings/{rec_id}/events", dependencies=EXPENSIVE, response_model=None,
             responses={200: {"model": EventsAnswer}, **_ERRORS})
 def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
-           state: ServiceState = Depends(get_state)) -> Response:
+           lookback: LookBack = Depends(get_lookback)) -> Response:
     """GO edges (`go_rise`, `go_fall`) and SYNC 0→1 edges (`sync`, with `seq`, `tod_s`) of a
     recording, and the records of its event log (alarms, clock steps, annotations), by
     time on the series' axis."""
     t0, cpu0 = time.perf_counter(), time.thread_time()
-    idx, end = state.lookback.index(rec_id)
+    idx, end = lookback.index(rec_id)
     return _json({"events": idx.events(end=end)}, t0, cpu0)
