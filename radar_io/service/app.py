@@ -38,6 +38,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     """The service app for ``cfg``; refuses a configuration that can never work
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
     from radar_io.service.alarms import attach_alarms, status_loop
+    from radar_io.service.lookback import LookBack
     from radar_io.service.routers import (
         alarms,
         calibration,
@@ -50,8 +51,6 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
         series,
         status,
     )
-
-    from radar_io.service.lookback import LookBack
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     state = ServiceState(cfg)

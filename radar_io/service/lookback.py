@@ -106,9 +106,11 @@ class LookBack:
         return {"built": self.built, "errors": self.errors, "pending": self._q.qsize(),
                 "last_error": self.last_error}
 
-    def close(self, timeout_s: float = 30.0) -> None:
-        """Finish the index being built (up to ``timeout_s``); drop the queued ones (they are
-        built on their first query)."""
+    def close(self, timeout_s: float = 1.0) -> None:
+        """Stop the worker: the queued recordings are dropped (indexed on their first query)
+        and an index being built is given ``timeout_s`` and then left to the daemon thread:
+        an index is a cache, and an interrupted build or extension is found and redone by
+        the next query (docs/lookback.md), so a stop never waits for one."""
         if self._thread is None:
             return
         while True:
