@@ -286,7 +286,8 @@ def test_bad_requests_and_no_room(flight, tmp_path):
     with pytest.raises(StorageError, match="bytes free") as exc:
         SeriesIndex(local, options, reserve_bytes=1 << 62).update()
     assert exc.value.errno is not None
-    assert [p.name for p in tmp_path.iterdir()] == [local.name]  # nothing left behind
+    # nothing left behind but the (empty) lock file
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".flight.series.lock", local.name]
 
 
 def test_empty_recording_and_block_boundaries(spec, tmp_path, monkeypatch):
@@ -329,3 +330,22 @@ def test_version_1_recording_uses_its_wall_clock(spec, tmp_path):
     t = np.array(answer["t_s"])
     assert np.all(np.diff(t) >= 0) and t[0] == 0.0  # the backward wall-clock step is held
     assert answer["frames"] == len(decode_bytes(b"".join(d for _, _, d in chunks)))
+
+
+def test_two_processes_building_the_same_index_at_once(flight, tmp_path):
+    """The index is locked across processes (``flock``): both get the right answer, one
+    builds, the other finds it fresh; one directory, no temporary left."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from radar_io.analysis.series import query_series
+
+    rec, _, options, t, cols = flight
+    local = tmp_path / rec.name
+    local.write_bytes(rec.read_bytes())
+    with ProcessPoolExecutor(2) as pool:
+        answers = list(pool.map(query_series, [local] * 2, [options] * 2, [["h_m"]] * 2,
+                                [1.0] * 2, [30.0] * 2, [400] * 2))
+    for a in answers:
+        check(a, expected(t, cols, ["h_m"], 1.0, 30.0, 400), 400)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".flight.series.lock", "flight.rdrlog",
+                                                          "flight.series"]

@@ -28,6 +28,7 @@ bucket from memory-mapped files: never the whole range.
 from __future__ import annotations
 
 import errno
+import fcntl
 import hashlib
 import json
 import logging
@@ -38,7 +39,8 @@ import struct
 import threading
 import time
 import uuid
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -388,9 +390,24 @@ _LOCKS: dict[Path, threading.Lock] = {}
 _LOCKS_GUARD = threading.Lock()
 
 
-def _lock_for(path: Path) -> threading.Lock:
+@contextmanager
+def _locked(recording: Path) -> Iterator[None]:
+    """One index user at a time: a lock per recording for the threads of this process and
+    ``flock`` on ``.X.series.lock`` for other processes (worker processes, a CLI)."""
     with _LOCKS_GUARD:
-        return _LOCKS.setdefault(path, threading.Lock())
+        lock = _LOCKS.setdefault(recording, threading.Lock())
+    with lock:
+        try:
+            fd = os.open(recording.parent / f".{index_dir(recording).name}.lock",
+                         os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise StorageError(f"cannot lock the look-back index of {recording}: "
+                               f"{exc.strerror}", errno=exc.errno) from exc
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            yield
+        finally:
+            os.close(fd)  # releases the flock
 
 
 def index_dir(recording: str | os.PathLike[str]) -> Path:
@@ -412,7 +429,6 @@ class SeriesIndex:
         self.dir = index_dir(self.recording)
         self.options = options
         self.reserve_bytes = reserve_bytes
-        self._lock = _lock_for(self.recording)
         self._identity = options.identity()
         self._columns = options.columns
         #: what the last update did: "fresh", "built", "rebuilt", "appended"
@@ -445,7 +461,7 @@ class SeriesIndex:
                 raise ValidationError(f"{what} must be a finite number, got {v}")
         if start_s is not None and end_s is not None and start_s > end_s:
             raise ValidationError(f"start_s {start_s} is after end_s {end_s}")
-        with self._lock:
+        with _locked(self.recording):
             man = self._update(end)
             try:
                 t, levels = self._open(man, names)
@@ -460,7 +476,7 @@ class SeriesIndex:
         """GO edges (``go_rise``, ``go_fall``) and SYNC 0→1 edges (``sync``) of the recording,
         with the records of its event log ``X.events.jsonl`` (alarms, clock steps,
         annotations: ``kind``, ``t_ns``, ``mono_ns``) put on the same time axis; by time."""
-        with self._lock:
+        with _locked(self.recording):
             man = self._update(end)
             try:
                 found = self._read_events(man)
@@ -473,7 +489,7 @@ class SeriesIndex:
 
     def update(self, end: int | None = None) -> dict[str, Any]:
         """Build, rebuild or extend the index as needed; the manifest."""
-        with self._lock:
+        with _locked(self.recording):
             return self._update(end)
 
     # -- keeping it fresh ------------------------------------------------------------------
@@ -554,8 +570,9 @@ class SeriesIndex:
     def _build(self, size: int, what: str) -> dict[str, Any]:
         """A new index in a temporary directory, swapped in when complete."""
         parent = self.dir.parent
-        for old in parent.glob(f".{self.dir.name}.*"):  # left by an interrupted build
-            shutil.rmtree(old, ignore_errors=True)
+        for pattern in (f".{self.dir.name}.tmp-*", f".{self.dir.name}.old-*"):
+            for old in parent.glob(pattern):  # left by an interrupted build
+                shutil.rmtree(old, ignore_errors=True)
         tmp = parent / f".{self.dir.name}.tmp-{uuid.uuid4().hex[:8]}"
         try:
             tmp.mkdir()
@@ -665,6 +682,22 @@ class SeriesIndex:
         except (OSError, ValueError) as exc:
             raise IndexDamaged(f"events.jsonl: {exc}") from exc
         return out
+
+
+def query_series(recording: str | os.PathLike[str], options: SeriesOptions,
+                 columns: list[str], start_s: float | None = None, end_s: float | None = None,
+                 points: int = 1000, end: int | None = None,
+                 reserve_bytes: int = 0) -> dict[str, Any]:
+    """:meth:`SeriesIndex.series` as one call of plain, picklable data (for a worker
+    thread or process)."""
+    return SeriesIndex(recording, options, reserve_bytes).series(columns, start_s, end_s,
+                                                                 points, end=end)
+
+
+def query_events(recording: str | os.PathLike[str], options: SeriesOptions,
+                 end: int | None = None, reserve_bytes: int = 0) -> list[dict[str, Any]]:
+    """:meth:`SeriesIndex.events` as one call of plain, picklable data."""
+    return SeriesIndex(recording, options, reserve_bytes).events(end=end)
 
 
 def _head_sha(path: Path, n: int) -> str:

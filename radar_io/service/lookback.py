@@ -46,12 +46,15 @@ class LookBack:
         s = self.state
         return SeriesOptions(s.spec, s.acq.calibration, s.site, s.path)
 
-    def index(self, rec_id: str) -> tuple[SeriesIndex, int | None]:
-        """The index of a recording (NotFoundError / ValidationError for a bad id) and how far
-        to read it: the committed bytes of the open recording, None (all) for a closed one."""
-        path = self.state.recording_path(rec_id)
-        idx = SeriesIndex(path, self.options(), reserve_bytes=self.state.recorder.low_space_bytes)
-        return idx, self.state.recorder.committed_bytes(rec_id)
+    def request(self, rec_id: str) -> dict[str, Any]:
+        """The plain (picklable) arguments of a query of a recording, for
+        :func:`~radar_io.analysis.series.query_series` / ``query_events``: its path
+        (NotFoundError / ValidationError for a bad id), the options, how far to read it (the
+        committed bytes of the open recording, None for a closed one) and the free space to
+        keep."""
+        return {"recording": self.state.recording_path(rec_id), "options": self.options(),
+                "end": self.state.recorder.committed_bytes(rec_id),
+                "reserve_bytes": self.state.recorder.low_space_bytes}
 
     # -- built when a recording closes -----------------------------------------------------
     def start(self) -> None:

@@ -13,6 +13,7 @@ from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.requests import HTTPConnection
 
+from radar_io.analysis.series import query_events, query_series
 from radar_io.service.errors import responses
 from radar_io.service.lookback import LookBack
 from radar_io.service.state import ID_PATTERN
@@ -20,7 +21,9 @@ from radar_io.service.state import ID_PATTERN
 router = APIRouter(tags=["recordings"])
 
 #: dependencies of the expensive look-back requests: the per-kind limiter (kind "series",
-#: 429 + Retry-After) is attached here, for both routes
+#: 429 + Retry-After) is attached here, for both routes. Each route's work is one call of
+#: plain, picklable data (``query_series`` / ``query_events``), so it can as well be handed
+#: to a limiter's worker pool or process as it is.
 EXPENSIVE: list[Any] = []
 _ERRORS = responses(404, 422, 429, 507)
 COLUMNS_PATTERN = r"^[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*$"
@@ -85,8 +88,9 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     non-null samples of each (null: no value). Otherwise every frame (min = max). The
     first query of a recording builds its index (docs/lookback.md)."""
     t0, cpu0 = time.perf_counter(), time.thread_time()
-    idx, end = lookback.index(rec_id)
-    return _json(idx.series(columns.split(","), start_s, end_s, points, end=end), t0, cpu0)
+    doc = query_series(columns=columns.split(","), start_s=start_s, end_s=end_s, points=points,
+                       **lookback.request(rec_id))
+    return _json(doc, t0, cpu0)
 
 
 @router.get("/api/recordings/{rec_id}/events", dependencies=EXPENSIVE, response_model=None,
@@ -97,5 +101,4 @@ def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     recording, and the records of its event log (alarms, clock steps, annotations), by
     time on the series' axis."""
     t0, cpu0 = time.perf_counter(), time.thread_time()
-    idx, end = lookback.index(rec_id)
-    return _json({"events": idx.events(end=end)}, t0, cpu0)
+    return _json({"events": query_events(**lookback.request(rec_id))}, t0, cpu0)
