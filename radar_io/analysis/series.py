@@ -39,11 +39,11 @@ import struct
 import threading
 import time
 import uuid
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -54,6 +54,7 @@ from radar_io.errors import StorageError, ValidationError
 from radar_io.wirespec.frame import FrameSpec
 
 log = logging.getLogger("radar_io.series")
+T = TypeVar("T")
 
 #: index format; another value in a manifest means the index is rebuilt
 FORMAT = "radar_io.series/1"
@@ -416,8 +417,8 @@ def index_dir(recording: str | os.PathLike[str]) -> Path:
 
 
 class SeriesIndex:
-    """The look-back index of one recording (built, updated and queried under one lock per
-    recording in this process).
+    """The look-back index of one recording (checked, built, extended and opened under one
+    lock per recording, across threads and processes).
 
     ``reserve_bytes``: free space the index never takes (the live recording's room); a
     build that would need it raises StorageError (ENOSPC) and leaves the old index.
@@ -461,28 +462,14 @@ class SeriesIndex:
                 raise ValidationError(f"{what} must be a finite number, got {v}")
         if start_s is not None and end_s is not None and start_s > end_s:
             raise ValidationError(f"start_s {start_s} is after end_s {end_s}")
-        with _locked(self.recording):
-            man = self._update(end)
-            try:
-                t, levels = self._open(man, names)
-            except IndexDamaged as exc:
-                log.warning("look-back index of %s damaged (%s): rebuilt", self.recording.name,
-                            exc)
-                man = self._build(self._size(end), "rebuilt")
-                t, levels = self._open(man, names)
+        _, (t, levels) = self._read(end, lambda man: self._open(man, names))
         return _answer(t, levels, start_s, end_s, points)
 
     def events(self, end: int | None = None) -> list[dict[str, Any]]:
         """GO edges (``go_rise``, ``go_fall``) and SYNC 0→1 edges (``sync``) of the recording,
         with the records of its event log ``X.events.jsonl`` (alarms, clock steps,
         annotations: ``kind``, ``t_ns``, ``mono_ns``) put on the same time axis; by time."""
-        with _locked(self.recording):
-            man = self._update(end)
-            try:
-                found = self._read_events(man)
-            except IndexDamaged:
-                man = self._build(self._size(end), "rebuilt")
-                found = self._read_events(man)
+        man, found = self._read(end, self._read_events)
         found += _event_log(self.recording.with_suffix(".events.jsonl"), man["recording"])
         found.sort(key=lambda e: (math.inf if e["t_s"] is None else e["t_s"]))
         return found
@@ -491,6 +478,20 @@ class SeriesIndex:
         """Build, rebuild or extend the index as needed; the manifest."""
         with _locked(self.recording):
             return self._update(end)
+
+    def _read(self, end: int | None, read: Callable[[dict[str, Any]], T]
+              ) -> tuple[dict[str, Any], T]:
+        """The manifest of the index brought up to date and ``read(manifest)``, rebuilding
+        the index once when ``read`` finds it damaged; under the lock."""
+        with _locked(self.recording):
+            man = self._update(end)
+            try:
+                return man, read(man)
+            except IndexDamaged as exc:
+                log.warning("look-back index of %s damaged (%s): rebuilt",
+                            self.recording.name, exc)
+                man = self._build(self._size(end), "rebuilt")
+                return man, read(man)
 
     # -- keeping it fresh ------------------------------------------------------------------
     def _size(self, end: int | None) -> int:
