@@ -67,7 +67,8 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
         status, body = get(srv.base, "/api/recordings/flight/events")
         assert status == 200
         kinds = [e["kind"] for e in body["events"]]
-        assert kinds.count("go_rise") == 1 and kinds.count("sync") >= 30
+        assert kinds.count("go") == 1 and kinds.count("sync") >= 30
+        assert body["events"][kinds.index("go")]["edge"] == "rise"
         assert all(set(e) >= {"kind", "t_s", "t_ns", "seq", "tod_s"} for e in body["events"])
 
         for path, code, words in [
