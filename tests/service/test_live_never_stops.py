@@ -192,6 +192,9 @@ def _arguments(method: str, path: str, op: dict[str, Any], ctx: dict[str, str]
         ("GET", "/api/recordings/{rec_id}/report"):
             (f"/api/recordings/{earlier}/report?format=html", None),
         ("GET", "/api/sync-events"): (f"/api/sync-events?recording={earlier}", None),
+        ("GET", "/api/recordings/{rec_id}/series"):  # the recording being written
+            (f"/api/recordings/{rec}/series?columns=h_m,sync,seq&points=100", None),
+        ("GET", "/api/recordings/{rec_id}/events"): (f"/api/recordings/{rec}/events", None),
         ("POST", "/api/replays"): ("/api/replays", {"recording": earlier, "speed": 4.0}),
         ("POST", "/api/replays/{sid}/seek"): (f"/api/replays/{sid}/seek", {"position_s": 1.0}),
         ("POST", "/api/replays/{sid}/step"): (f"/api/replays/{sid}/step", {"n": 3}),
@@ -245,7 +248,8 @@ MUST_SUCCEED = {("GET", "/api/status"), ("GET", "/api/track"), ("GET", "/api/rec
                 ("POST", "/api/replays/{sid}/step"), ("POST", "/api/replays/{sid}/speed"),
                 ("GET", "/api/calibration"), ("PUT", "/api/calibration"),
                 ("POST", "/api/coordinates/runway-to-radar"), ("GET", "/api/alarms"),
-                ("GET", "/api/recordings/{rec_id}/report"), ("POST", "/api/calibration/bias")}
+                ("GET", "/api/recordings/{rec_id}/report"), ("POST", "/api/calibration/bias"),
+                ("GET", "/api/recordings/{rec_id}/series"), ("GET", "/api/recordings/{rec_id}/events")}
 RECORDING_ROUTES = [("POST", "/api/recordings/stop"), ("POST", "/api/recordings/start")]
 
 
