@@ -25,7 +25,7 @@ from radar_io.benchmarks.service_load import end_process
 from radar_io.coordinates.transforms import load_site
 from radar_io.errors import ConfigError
 from radar_io.recording.recorder import Recorder
-from radar_io.service.acquisition import Acquisition
+from radar_io.service.pipeline import Pipeline as ServicePipeline
 from radar_io.service.history import History
 from radar_io.sinks import open_sink
 from radar_io.sinks.mqtt import MqttPublisher, parse_mqtt_url
@@ -151,8 +151,8 @@ class Pipeline:
         self.submits = 0
         self.pub = MqttPublisher(url, status=self.status,
                                  sync_events=lambda: self.recorder.sync_events)
-        self.acq = Acquisition("sim://?rate_hz=1000&sync_every_s=1&seed=3", spec,
-                               self.recorder, self.history, self.publish, site=site)
+        self.acq = ServicePipeline("sim://?rate_hz=1000&sync_every_s=1&seed=3", spec,
+                                   self.history, self.publish, recorder=self.recorder, site=site)
 
     def publish(self, items) -> None:      # what Service wires: hub + MQTT
         t0 = time.perf_counter()
@@ -405,3 +405,63 @@ def test_serve_refuses_a_bad_publish_url_in_one_line(tmp_path):
                   "--publish", "mqtt://radar:pw@127.0.0.1:1883/x", timeout=60)
     err = res.stderr.decode().strip()
     assert res.returncode == 2 and "\n" not in err and "not in the URL" in err and "pw" not in err
+
+
+def test_ground_replay_outputs_say_the_data_is_not_live(broker, tmp_path):
+    """``serve --source replay://FILE`` drives the outputs from a recording: MQTT track
+    messages carry ``"replay": true``, ASTERIX I048/020 SIM = 1 (read by tshark), and
+    /api/status says ``source_kind: "replay"``."""
+    import urllib.request
+
+    import uvicorn
+    from conftest import require_program
+    from radar_io.encoding.asterix_cat048 import decode_records
+    from radar_io.recording.rdrlog import RecordingWriter
+    from radar_io.service.app import build_app
+    from radar_io.service.config import ServiceConfig
+    from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+    from test_asterix import tshark_fields, write_pcap
+
+    require_program("tshark")
+    data, _ = RadarSimulator(FlightScript(), SimConfig(seed=4, go_delay_s=0.0,
+                                                       ng_per_min=0)).generate(4000)
+    rec = tmp_path / "flight.rdrlog"
+    with RecordingWriter(rec, load_spec()) as w:
+        for k in range(0, len(data), 480):   # 20 frames per chunk, 20 ms apart
+            w.write(data[k:k + 480], 1_700_000_000_000_000_000 + k * 41_667, k * 41_667)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.bind(("127.0.0.1", 0))
+    rx.settimeout(10)
+    cfg = ServiceConfig(source=f"replay://{rec}?speed=2", data_dir=str(tmp_path / "data"),
+                        site=str(ROOT / "firmware_specs" / "sites" / "demo.toml"),
+                        auto_record="manual", publish=f"mqtt://127.0.0.1:{broker.port}/gr",
+                        asterix_out=f"udp://127.0.0.1:{rx.getsockname()[1]}")
+    app = build_app(cfg)
+    sub = Subscriber(broker.port, "gr")
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    grams: list[bytes] = []
+    try:
+        thread.start()
+        assert wait_for(lambda: server.started, 20)
+        port = server.servers[0].sockets[0].getsockname()[1]
+        assert wait_for(lambda: len(sub.seqs()) >= 1000, 30)
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/api/status", timeout=10) as r:
+            status = json.loads(r.read())
+        while len(grams) < 50:
+            grams.append(rx.recv(65535))
+    finally:
+        server.should_exit = True
+        thread.join(15)
+        sub.close()
+        rx.close()
+    assert status["source_kind"] == "replay" and status["mode"] == "replay"
+    with sub.lock:
+        track = list(sub.track)
+    assert len(track) >= 1000 and all(m["replay"] is True for m in track)
+    pcap = tmp_path / "ground.pcap"
+    write_pcap(pcap, grams)
+    got = tshark_fields(pcap)
+    n = len(got["asterix.048_020_SIM"])
+    assert n > 100 and (got["asterix.048_020_SIM"] == 1).all()
+    assert n == len(decode_records(b"".join(grams))["sim"])   # tshark read every record

@@ -8,7 +8,7 @@ import time
 import independent
 from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.recording.recorder import Recorder
-from radar_io.service.acquisition import Acquisition
+from radar_io.service.pipeline import Pipeline
 from radar_io.service.history import History
 
 N = 3000
@@ -33,8 +33,8 @@ def test_backward_seek_adds_no_gap_and_no_edge(tmp_path, spec):
         for k in range(0, len(data), CHUNK):
             w.write(data[k:k + CHUNK], t_ns=1_000_000 * (k // CHUNK))
     rec = Recorder(tmp_path / "data", spec, None, "test", auto="manual")
-    rec.enabled = False  # replayed bytes are not recorded again
-    acq = Acquisition(f"replay://{p}?speed=0", spec, rec, History(), lambda _m: None)
+    rec.enabled = False  # replayed bytes are not recorded again; its sync index shows the edges
+    acq = Pipeline(f"replay://{p}?speed=0", spec, History(), lambda _m: None, recorder=rec)
     src = acq.source
     src.pause()
     src.step(5)  # 5 chunks: 161 whole frames and 21 bytes of the 162nd

@@ -378,7 +378,7 @@ def attach_alarms(svc: Any) -> AlarmEngine:
 
     engine = AlarmEngine(rules, builtin, on_change=on_change,
                          on_event=EventLog(svc.recorder.dir, lambda: svc.recorder.current))
-    svc.acq.processors.append(engine.feed)
+    svc.live.processors.append(engine.feed)  # the live pipeline only: never a replay
     return engine
 
 

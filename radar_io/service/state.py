@@ -1,10 +1,16 @@
-"""The service's shared state: configuration, acquisition, recorder, history, hub, outputs.
+"""The service's shared state: configuration, the live pipeline, recorder, history, hub,
+outputs and the replay sessions.
 
 Built once by :func:`radar_io.service.app.build_app` (everything that can be refused
 is refused here, before the server binds), started and stopped by the app's lifespan
-(:meth:`ServiceState.start`, :meth:`ServiceState.stop`): the reader thread, the sink
-workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver and the CAN
-air-data reader. Nothing opens a file, a device or a connection before ``start``.
+(:meth:`ServiceState.start`, :meth:`ServiceState.stop`): the live reader thread, the sink
+workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver, the CAN
+air-data reader and the replay sessions. Nothing opens a file, a device or a connection
+before ``start``.
+
+The live pipeline's source is fixed for the life of the service: no route changes it,
+and only ``POST /api/recordings/start|stop`` changes the recorder. Replays run as
+sessions of their own (:mod:`radar_io.service.sessions`).
 """
 
 from __future__ import annotations
@@ -21,11 +27,11 @@ from radar_io.decoding.biases import Calibration, load_calibration
 from radar_io.errors import ConfigError, NotFoundError, ValidationError
 from radar_io.coordinates.transforms import load_site
 from radar_io.recording.recorder import Recorder
-from radar_io.service.acquisition import Acquisition
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
-from radar_io.sources.replay import ReplaySource
+from radar_io.service.pipeline import Pipeline, Processor
+from radar_io.service.sessions import ReplaySessions
 from radar_io.wirespec.frame import load_spec
 
 log = logging.getLogger("radar_io.service")
@@ -75,9 +81,16 @@ class ServiceState:
                 raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
                                   f"{exc.strerror}") from exc
         self.runway_jobs: Any = None  # RunwayJobs, created by the runway router on first use
-        self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
-                               self.hub.publish_threadsafe, site=self.site, calibration=cal)
-        self.replay: ReplaySource | None = None
+        ground_replay = True if cfg.source.startswith("replay:") else None
+        #: the live pipeline: the one with the recorder, sinks, alarms, sync index and MQTT
+        self.live = Pipeline(cfg.source, self.spec, self.history, self.hub.publish_threadsafe,
+                             recorder=self.recorder, site=self.site, calibration=cal,
+                             replay=ground_replay)
+        self.extra_processors: list[Processor] = []  #: shared by live and replays (stateless)
+        self.replays = ReplaySessions(self._session_options, max_sessions=cfg.max_replays,
+                                      idle_s=cfg.replay_idle_s, ws_queue_size=cfg.ws_queue_size,
+                                      ws_max_clients=cfg.ws_max_clients,
+                                      ws_batch_interval_s=cfg.ws_batch_interval_s)
         self.sinks: dict[str, Any] = {}       # name → SinkWorker (started in start())
         self._sink_defs: dict[str, Any] = {}  # name → Sink, checked now, opened by its worker
         self.air: Any = None
@@ -94,7 +107,8 @@ class ServiceState:
         if self.path is not None:
             if self.path.frame == "runway" and self.site is None:
                 raise ConfigError("path: a runway-frame reference path needs a site (--site)")
-            self.acq.processors.append(DeviationProcessor(self.path))
+            self.extra_processors.append(DeviationProcessor(self.path))
+            self.live.processors.append(self.extra_processors[-1])
         if cfg.tlm_out and self.path is None:
             raise ConfigError("tlm_out: TLM1 carries the path deviation (dy_m, dz_m): "
                               "give a reference path (--path)")
@@ -136,7 +150,7 @@ class ServiceState:
         for name, sink in self._sink_defs.items():
             self.sinks[name] = SinkWorker(name, sink)
         if self.sinks:  # the columns are built once per read for every sink
-            self.acq.processors.append(fan_out(list(self.sinks.values())))
+            self.live.processors.append(fan_out(list(self.sinks.values())))
         if self.air is not None:
             self.air.start()
         if self.mqtt is not None:
@@ -146,17 +160,31 @@ class ServiceState:
 
             self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options)
             self.recorder.on_closed = self.archiver.submit
-        self.acq.start()
+        self.replays.start(loop)
+        self.live.start()
+
+    @property
+    def acq(self) -> Pipeline:
+        """The live pipeline (its former name)."""
+        return self.live
 
     def _archive_options(self) -> dict[str, Any]:
         """What a closed recording is archived with: the live site, spec, calibration, path."""
-        return {"site": self.site, "spec": self.spec, "calibration": self.acq.calibration,
+        return {"site": self.site, "spec": self.spec, "calibration": self.live.calibration,
                 "reference_path": self.path}
 
+    def _session_options(self) -> dict[str, Any]:
+        """What a new replay session's pipeline is built with: the live spec, site,
+        calibration and path deviation — none of the live outputs."""
+        return {"spec": self.spec, "site": self.site, "calibration": self.live.calibration,
+                "processors": list(self.extra_processors)}
+
     def stop(self) -> None:
-        """Stop the reader, close the recording, finish archiving, cancel runway jobs, stop
-        the sinks, the MQTT publisher and the air-data reader — each even if one fails."""
-        steps = [("reader", self.acq.stop), ("recorder", self.recorder.close)]
+        """Stop the replay sessions and the live reader, close the recording, finish
+        archiving, cancel runway jobs, stop the sinks, the MQTT publisher and the air-data
+        reader — each even if one fails."""
+        steps = [("replay sessions", self.replays.close), ("reader", self.live.stop),
+                 ("recorder", self.recorder.close)]
         if self.archiver is not None:  # finishes the recording just closed
             steps.append(("archiver", self.archiver.close))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files
@@ -204,17 +232,16 @@ class ServiceState:
         return p
 
     def status(self) -> dict[str, Any]:
-        st = self.acq.status()
+        st = self.live.status()
         st.update(self.hub.stats())
         st["recording"] = self.recorder.current
         if self.archiver is not None:
             st["archive"] = self.archiver.stats()
         st["storage"] = self.recorder.storage()  # free_bytes, low_space, last_error
         st["auto_record"] = self.recorder.auto
-        st["calibration"] = self.acq.calibration.id
+        st["calibration"] = self.live.calibration.id
         st["control_enabled"] = self.token is not None
-        st["replay"] = self.replay.state() if self.replay is not None and st["mode"] == "replay" \
-            else None
+        st["replays"] = self.replays.brief()
         st["site"] = self.site.name if self.site else None
         st["version"] = __version__
         st["instance"] = self.instance

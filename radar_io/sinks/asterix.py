@@ -128,10 +128,13 @@ class AsterixFileWriter(Sink):
 
 
 def service_sink(svc: Any, target: str) -> AsterixSink:
-    """What ``serve --asterix-out URL`` opens: SAC/SIC from the service's site, SIM set for
-    the simulator. Run it in a :class:`~radar_io.sinks.worker.SinkWorker` fed by the
-    acquisition's processors."""
-    simulated = str(svc.cfg.source).startswith("sim:")
+    """What ``serve --asterix-out URL`` opens: SAC/SIC from the service's site, SIM set when
+    the data is not live (the simulator, or ``--source replay://`` driving the outputs from
+    a recording). Run it in a :class:`~radar_io.sinks.worker.SinkWorker` fed by the live
+    pipeline's processors."""
+    from radar_io.sources import source_kind
+
+    simulated = source_kind(str(svc.cfg.source)) in ("sim", "replay")
     if svc.site is not None:
         return AsterixSink(target, site=svc.site, simulated=simulated)
     return AsterixSink(target, simulated=simulated)

@@ -388,17 +388,12 @@ class MqttSink(Sink):
 
 
 def attach_to_service(svc: Any, url: str, **options: Any) -> MqttPublisher:
-    """What ``serve --publish URL`` wires: a publisher fed by the service's acquisition
-    (the numbered messages it hands the websocket hub), its ``status()`` and its recorder's
-    sync events. Call before the acquisition starts; ``start()`` / ``close()`` it with the
-    service. ``options``: username, password, ca_file, … of :class:`MqttPublisher`."""
+    """What ``serve --publish URL`` wires: a publisher fed by the service's live pipeline
+    (the numbered messages it hands the websocket hub; under ``serve --source replay://``
+    they carry ``"replay": true``), its ``status()`` and its recorder's sync events. Call
+    before the pipeline starts; ``start()`` / ``close()`` it with the service.
+    ``options``: username, password, ca_file, … of :class:`MqttPublisher`."""
     pub = MqttPublisher(url, status=svc.status,
                         sync_events=lambda: svc.recorder.sync_events, **options)
-    hub_publish, submit = svc.acq.publish, pub.submit
-
-    def publish(items: list[tuple[int, str]]) -> None:
-        hub_publish(items)
-        submit(items)
-
-    svc.acq.publish = publish
+    svc.live.publishers.append(pub.submit)
     return pub

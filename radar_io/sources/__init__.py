@@ -38,6 +38,13 @@ def scheme_of(url: str) -> str:
     return head.lower() if sep and head.isidentifier() else ""
 
 
+def source_kind(url: str) -> str:
+    """What kind of data a source URL gives: ``"sim"`` (the simulator), ``"replay"`` (a
+    recording played back) or ``"serial"`` (a device or any pyserial URL: the radar)."""
+    scheme = scheme_of(url)
+    return scheme if scheme in ("sim", "replay") else "serial"
+
+
 def open_source(url: str) -> ByteSource:
     """The source for ``url`` (not yet opened). Raises SourceError for an empty URL."""
     if not url:
@@ -46,4 +53,4 @@ def open_source(url: str) -> ByteSource:
     return factory(url)
 
 
-__all__ = ["ByteSource", "DEFAULT_SOURCE", "SOURCES", "open_source", "scheme_of"]
+__all__ = ["ByteSource", "DEFAULT_SOURCE", "SOURCES", "open_source", "scheme_of", "source_kind"]

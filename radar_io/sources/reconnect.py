@@ -74,12 +74,6 @@ class ReconnectingSource:
             self.last_error = None
         return data
 
-    def replace(self, source: ByteSource) -> None:
-        """Close the current source and read from ``source`` from now on."""
-        self.close()
-        self.source = source
-        self._delay = self.backoff_s[0]
-
     def close(self) -> None:
         """Close the source (never raises); the next read reopens it."""
         try:

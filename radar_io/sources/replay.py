@@ -4,8 +4,8 @@ Paced by the recorded monotonic receive times (``mono_ns``; a version-1 file has
 wall-clock ``t_ns``, used in its place), so a wall-clock step during the recording neither
 stalls the replay nor moves a seek (``speed`` multiplies the pace, ``0`` = as
 fast as possible), with pause, resume, seek, step and speed for the service's replay
-controls. The same class serves ``radar-io serve --source replay://…`` and the
-dashboard's replay panel."""
+controls. The same class serves ``radar-io serve --source replay://…`` (the ground replay
+that drives the outputs) and the service's replay sessions (``service/sessions.py``)."""
 
 from __future__ import annotations
 
@@ -27,11 +27,16 @@ class ReplaySource:
     delivers the next recorded chunk (one read of the original port) while paused.
 
     After a :meth:`seek` the next bytes do not follow the previous ones: the read that
-    delivers them sets :attr:`discontinuous`, and the acquisition then resets its framer
+    delivers them sets :attr:`discontinuous`, and the pipeline then resets its framer
     and edge state (no SEQ gap, no sync / GO edge counted across the jump).
+
+    ``size_bytes`` limits the replay to the chunks that end within the file's first
+    ``size_bytes`` (a recording still being written: its committed bytes). Each read that
+    returns data sets :attr:`last_t_ns` and :attr:`last_mono_ns` to that chunk's recorded
+    receive times.
     """
 
-    def __init__(self, path: Path, speed: float = 1.0) -> None:
+    def __init__(self, path: Path, speed: float = 1.0, size_bytes: int | None = None) -> None:
         if speed < 0:
             raise SourceError("replay speed must be >= 0")
         self.path = Path(path)
@@ -39,8 +44,15 @@ class ReplaySource:
         with RecordingReader(self.path) as r:
             self.header = r.header
             # (payload offset, monotonic receive time, length, wall-clock receive time)
-            self._index = [(c.offset + c.head_size, c.mono_ns, len(c.data), c.t_ns) for c in r]
+            self._index = []
+            for c in r:
+                end = c.offset + c.head_size + len(c.data)
+                if size_bytes is not None and end > size_bytes:
+                    break
+                self._index.append((c.offset + c.head_size, c.mono_ns, len(c.data), c.t_ns))
             self.report = r.report
+        self.last_t_ns = 0     #: recorded wall-clock receive time of the last chunk read (ns)
+        self.last_mono_ns = 0  #: recorded monotonic receive time of the last chunk read (ns)
         self._lock = threading.Lock()
         self.speed = speed
         self.paused = False
@@ -146,7 +158,7 @@ class ReplaySource:
         if entry is None or wait > 0:
             time.sleep(min(max(wait, 0.0), timeout_s))
             return b""
-        off, _, length, _ = entry
+        off, mono_ns, length, t_ns = entry
         try:
             self._f.seek(off)
             data = self._f.read(length)
@@ -154,6 +166,7 @@ class ReplaySource:
             raise SourceError(f"reading recording {self.path.name}: {exc.strerror}") from exc
         if len(data) != length:
             raise SourceError(f"recording {self.path.name} changed under the replay")
+        self.last_t_ns, self.last_mono_ns = t_ns, mono_ns
         return data
 
 

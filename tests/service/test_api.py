@@ -1,4 +1,5 @@
-"""REST, websocket resume, control with token, recordings, replay and calibration on a live service."""
+"""REST, websocket resume, control with token, recordings, replay sessions and calibration on
+a live service."""
 
 from __future__ import annotations
 
@@ -61,7 +62,8 @@ def test_status_has_every_field(svc):
 
 @pytest.mark.parametrize("method,path,body", [
     ("POST", "/api/recordings/start", None), ("POST", "/api/recordings/stop", None),
-    ("POST", "/api/replay", {"recording": "x", "speed": 1}), ("POST", "/api/replay/pause", None),
+    ("POST", "/api/replays", {"recording": "x", "speed": 1}), ("POST", "/api/replays/0a/pause", None),
+    ("DELETE", "/api/replays/0a", None),
     ("PUT", "/api/calibration", {"biases": {"dsr_m": 1}}),
 ])
 def test_control_needs_the_token(svc, method, path, body):
@@ -125,7 +127,7 @@ def test_decimated_stream(svc):
 
 
 def test_validation_errors_are_422_with_a_reason(svc):
-    code, doc = call(svc, "POST", "/api/replay", {"recording": "x", "speed": -4})
+    code, doc = call(svc, "POST", "/api/replays", {"recording": "x", "speed": -4})
     assert code == 422 and "speed" in json.dumps(doc)
     code, doc = call(svc, "PUT", "/api/calibration", {"biases": {"dsr_m": "a lot"}})
     assert code == 422 and doc["detail"][0]["loc"] == ["body", "biases", "dsr_m"] and msg(doc)
@@ -162,27 +164,35 @@ def test_manual_recording_and_replay_controls(svc):
     assert call(svc, "POST", "/api/recordings/stop")[1]["closed"] == rec
     with RecordingReader(svc.data / "recordings" / f"{rec}.rdrlog") as r:
         n_rec = sum(len(c.data) for c in r) // 24
-    code, st = call(svc, "POST", "/api/replay", {"recording": rec, "speed": 1.0})
-    assert code == 200 and st["recording"] == rec
-    wait_for(lambda: svc.get("/api/status")["mode"] == "replay", what="replay mode")
-    code, st = call(svc, "POST", "/api/replay/pause")
+    live0 = svc.get("/api/status")
+    code, st = call(svc, "POST", "/api/replays", {"recording": rec, "speed": 1.0})
+    assert code == 201 and st["recording"] == rec and st["ws"] == f"/ws/replays/{st['id']}"
+    sid = st["id"]
+    base = f"/api/replays/{sid}"
+    code, st = call(svc, "POST", base + "/pause")
     assert code == 200 and st["paused"]
     time.sleep(0.3)
-    f0 = svc.get("/api/status")["frames"]
+    f0 = svc.get(base)["frames"]
     time.sleep(0.4)
-    assert svc.get("/api/status")["frames"] == f0  # paused: nothing flows
-    call(svc, "POST", "/api/replay/step", {"n": 3})
-    wait_for(lambda: svc.get("/api/status")["frames"] > f0, what="step")
-    code, st = call(svc, "POST", "/api/replay/seek", {"position_s": 0.0})
+    assert svc.get(base)["frames"] == f0  # paused: nothing flows
+    call(svc, "POST", base + "/step", {"n": 3})
+    wait_for(lambda: svc.get(base)["chunk"] >= 3 and svc.get(base)["frames"] > f0, what="step")
+    code, st = call(svc, "POST", base + "/seek", {"position_s": 0.0})
     assert code == 200 and st["position_s"] == 0.0
-    call(svc, "POST", "/api/replay/speed", {"speed": 0})
-    call(svc, "POST", "/api/replay/resume")
-    st = wait_for(lambda: (s := svc.get("/api/status"))["replay"]["finished"] and s, what="end")
-    assert st["frames"] >= n_rec and st["recording"] is None  # replay is not recorded again
-    code, doc = call(svc, "POST", "/api/replay/stop")
-    assert code == 200
-    wait_for(lambda: (s := svc.get("/api/status"))["mode"] == "live" and s["connected"],
-             what="back to live")
+    call(svc, "POST", base + "/speed", {"speed": 0})
+    call(svc, "POST", base + "/resume")
+    st = wait_for(lambda: (s := svc.get(base))["finished"] and s, what="end")
+    assert st["frames"] >= n_rec and st["seq_gaps"] == 0
+    assert [r["id"] for r in svc.get("/api/replays")] == [sid]
+    live = svc.get("/api/status")  # the live pipeline never noticed
+    assert live["mode"] == "live" and live["connected"] and live["source"] == live0["source"]
+    assert live["reconnects"] == live0["reconnects"] and live["frames"] > live0["frames"]
+    assert [r["id"] for r in live["replays"]] == [sid]
+    code, doc = call(svc, "DELETE", base)
+    assert code == 200 and doc["id"] == sid
+    assert call(svc, "GET", base)[0] == 404 and svc.get("/api/replays") == []
+    code, doc = call(svc, "POST", "/api/replay", {"recording": rec, "speed": 1.0})
+    assert code == 410 and "POST /api/replays" in msg(doc)
 
 
 def test_put_calibration_applies_live(svc):
@@ -205,7 +215,9 @@ def test_openapi_docs(svc):
     with urllib.request.urlopen(svc.base + "/docs", timeout=5) as r:
         assert b"swagger" in r.read().lower()
     api = svc.get("/openapi.json")
-    assert "/api/status" in api["paths"] and "/api/replay/seek" in api["paths"]
+    assert "/api/status" in api["paths"] and "/api/replays/{sid}/seek" in api["paths"]
+    gone = api["paths"]["/api/replay/seek"]["post"]["responses"]
+    assert "410" in gone and not any(code.startswith("2") for code in gone)
 
 
 def test_serve_defaults_and_port_0_prints_the_real_port(tmp_path):

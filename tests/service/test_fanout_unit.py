@@ -11,7 +11,7 @@ import pytest
 
 from radar_io.calibration.pairing import estimate_bias
 from radar_io.errors import ValidationError
-from radar_io.service.acquisition import encode_message
+from radar_io.service.pipeline import encode_message
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
 

@@ -1,4 +1,4 @@
-"""The acquisition pipeline's edge cases: recorder edges, failures, sync attribution, replay."""
+"""The pipeline's edge cases: recorder edges, failures, sync attribution, replay sessions."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import time
 
 import independent
 from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
-from radar_io.service.acquisition import Acquisition
+from radar_io.service.pipeline import Pipeline, RecordedClock
 from radar_io.service.history import History
 from radar_io.recording.recorder import Recorder
 from radar_io.sources.replay import ReplaySource
@@ -20,7 +20,7 @@ GO, GO_SYNC, IDLE, SYNC = 0x0005, 0x8005, 0x0004, 0x8004
 def pipeline(tmp_path, spec, preroll_s: float = 2.0, source: str = "loop://"):
     rec = Recorder(tmp_path / "data", spec, None, source, auto="go", preroll_s=preroll_s)
     published: list = []
-    acq = Acquisition(source, spec, rec, History(8 << 20), published.extend)
+    acq = Pipeline(source, spec, History(8 << 20), published.extend, recorder=rec)
     return acq, rec, published
 
 
@@ -87,26 +87,51 @@ def test_manual_start_during_a_go_recording_survives_the_go_fall(tmp_path, spec)
     assert rec.stop() == rid
 
 
-def test_reader_survives_a_vanished_replay_and_goes_back_live(tmp_path, spec):
+def test_a_replay_pipeline_survives_a_vanished_recording(tmp_path, spec):
     p = tmp_path / "r.rdrlog"
     with RecordingWriter(p, spec) as w:
         w.write(b"".join(frames([GO] * 10)), 1)
     ctl = ReplaySource(p, 0)
     p.unlink()  # gone before the reader opens it
-    acq, rec, published = pipeline(tmp_path, spec, source="sim://?rate_hz=200")
-    acq.start()
+    published: list = []
+    pipe = Pipeline(ctl, spec, History(1 << 20), published.extend, clock=RecordedClock(ctl),
+                    replay="s1")
+    pipe.start()
     try:
-        acq.switch_source(ctl, "replay")
-        wait_for(lambda: acq.mode == "replay" and acq.last_error, what="replay failure reported")
-        assert acq._thread.is_alive()
-        from radar_io.sources import open_source
-
-        acq.switch_source(open_source("sim://?rate_hz=200"), "live")
-        n = len(published)
-        wait_for(lambda: acq.mode == "live" and len(published) > n + 50, what="live again")
+        st = wait_for(lambda: (s := pipe.status())["last_error"] and s,
+                      what="replay failure reported")
+        assert pipe._thread.is_alive() and not st["connected"] and st["mode"] == "replay"
+        assert "r.rdrlog" in st["last_error"] and not published
     finally:
-        acq.stop()
-        rec.close()
+        pipe.stop()
+
+
+def test_a_replay_pipeline_stamps_recorded_times_and_touches_no_recorder(tmp_path, spec):
+    """Replay: each message carries the recorded t_ns of the chunk that completed its frame
+    and the session id; no recorder exists, so no recording and no sync index."""
+    p = tmp_path / "r.rdrlog"
+    fr = frames([GO, GO_SYNC, GO, IDLE, SYNC, GO], seq0=40)
+    t0, m0 = 1_700_000_000_000_000_000, 5_000_000_000
+    with RecordingWriter(p, spec) as w:
+        w.write(fr[0] + fr[1][:7], t0, m0)                     # frame 40 completes here
+        w.write(fr[1][7:] + fr[2] + fr[3][:3], t0 + 10, m0 + 1_000)  # 41, 42
+        w.write(fr[3][3:] + fr[4] + fr[5], t0 + 20, m0 + 2_000)      # 43, 44, 45
+    src = ReplaySource(p, 0)
+    published: list = []
+    pipe = Pipeline(src, spec, History(1 << 20), published.extend, clock=RecordedClock(src),
+                    replay="abc")
+    pipe.start()
+    try:
+        wait_for(lambda: len(published) == 6, what="six replayed messages")
+    finally:
+        pipe.stop()
+    import json
+
+    msgs = [json.loads(t) for _, t in published]
+    assert [m["seq"] for m in msgs] == list(range(40, 46))
+    assert [m["t_ns"] for m in msgs] == [t0, t0 + 10, t0 + 10, t0 + 20, t0 + 20, t0 + 20]
+    assert all(m["replay"] == "abc" for m in msgs) and pipe.recorder is None
+    assert not (tmp_path / "data").exists()  # nothing recorded anywhere
 
 
 def test_a_damaged_chunk_length_skips_one_chunk_not_the_rest(tmp_path, spec):

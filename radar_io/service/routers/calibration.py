@@ -63,7 +63,7 @@ class BiasRequest(BaseModel):
 @router.get("/api/calibration")
 def get_calibration(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """The calibration set applied now."""
-    return state.acq.calibration.to_dict()
+    return state.live.calibration.to_dict()
 
 
 @router.put("/api/calibration", tags=["control"], dependencies=CONTROL,
@@ -79,7 +79,7 @@ def put_calibration(doc: CalibrationDoc = Body(..., examples=[{
     check_id(cal.id, "calibration id")
     save_calibration(cal, state.cal_dir / f"{cal.id}.json")
     save_calibration(cal, state.cal_dir / "active.json")
-    state.acq.set_calibration(cal)
+    state.live.set_calibration(cal)
     return cal.to_dict()
 
 

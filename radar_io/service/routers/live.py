@@ -13,6 +13,8 @@ from starlette.websockets import WebSocketDisconnect
 
 from radar_io.errors import NotFoundError
 from radar_io.service.errors import responses
+from radar_io.service.history import History
+from radar_io.service.hub import Hub
 from radar_io.service.routers.deps import get_state
 from radar_io.service.state import ServiceState
 
@@ -63,22 +65,17 @@ def track(since: int | None = Query(None, ge=0, description="return messages aft
     return Response(body, media_type="application/json")
 
 
-@router.websocket("/ws/live")
-async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", ge=0),
-                  max_hz: float | None = Query(None, gt=0, le=1000),
-                  batch: bool = Query(False, description="one JSON array per websocket frame"),
-                  ) -> None:
-    """Live messages: one JSON object per frame, or arrays with ``batch=1``; ``from=N``
-    resumes after msg_seq N; ``max_hz`` decimates. Beyond ``ws_max_clients``: closed 1013."""
-    state: ServiceState = get_state(ws)
-    hub = state.hub
+async def serve_stream(ws: WebSocket, hub: Hub, history: History, from_: int | None,
+                       max_hz: float | None, batch: bool) -> None:
+    """The live websocket protocol on ``ws`` for one (history, hub): ``/ws/live`` and each
+    ``/ws/replays/{id}``. Beyond the hub's ``max_clients``: closed 1013."""
     await ws.accept()
     if hub.full():
         hub.refused += 1
         await ws.close(WS_CLOSE_FULL, f"too many clients ({hub.max_clients}); try again later")
         return
     client = hub.register(ws, max_hz, batch)
-    sender = asyncio.create_task(client.run(state.history, from_))
+    sender = asyncio.create_task(client.run(history, from_))
     try:
         while True:
             recv = asyncio.create_task(ws.receive())
@@ -97,3 +94,14 @@ async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", g
             await sender  # its exception (a client gone mid-send) is retrieved, not logged
         except BaseException:  # noqa: BLE001 - cancelled or the connection's error
             pass
+
+
+@router.websocket("/ws/live")
+async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", ge=0),
+                  max_hz: float | None = Query(None, gt=0, le=1000),
+                  batch: bool = Query(False, description="one JSON array per websocket frame"),
+                  ) -> None:
+    """Live messages: one JSON object per frame, or arrays with ``batch=1``; ``from=N``
+    resumes after msg_seq N; ``max_hz`` decimates. Beyond ``ws_max_clients``: closed 1013."""
+    state: ServiceState = get_state(ws)
+    await serve_stream(ws, state.hub, state.history, from_, max_hz, batch)

@@ -7,7 +7,7 @@ from typing import Any
 from fastapi import APIRouter, Depends, HTTPException, Path, Query
 from fastapi.responses import FileResponse
 
-from radar_io.errors import ConflictError, StorageError
+from radar_io.errors import StorageError
 from radar_io.service.errors import responses
 from radar_io.service.routers.deps import CONTROL, get_state
 from radar_io.service.state import ID_PATTERN, ServiceState
@@ -70,11 +70,9 @@ def sync_events(recording: str | None = Query(None, pattern=ID_PATTERN,
 
 
 @router.post("/api/recordings/start", tags=["control"], dependencies=CONTROL,
-             responses=responses(401, 403, 409, 503, 507))
+             responses=responses(401, 403, 503, 507))
 def rec_start(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Start a manual recording (507 when the disk has no room)."""
-    if state.acq.mode != "live":
-        raise ConflictError("cannot record while replaying")
     try:
         return {"recording": state.recorder.start("manual")}
     except StorageError as exc:  # 507 no room (ENOSPC, EDQUOT, EFBIG), else 503

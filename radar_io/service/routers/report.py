@@ -32,7 +32,7 @@ def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     path = state.recording_path(rec_id)
     buf = io.BytesIO()
     with _REPORT_LOCK:
-        write_report(path, buf, format, site=state.site, calibration=state.acq.calibration,
+        write_report(path, buf, format, site=state.site, calibration=state.live.calibration,
                      ref_path=state.path, spec=state.spec)
     if format == "pdf":
         return Response(buf.getvalue(), media_type="application/pdf", headers={
