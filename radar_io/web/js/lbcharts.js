@@ -68,7 +68,7 @@ export class ColumnChart {
       bands: [{ series: [2, 1], fill: color + "55" }],
       axes: [{ ...axis, values: (u, ticks, _a, _s, incr) => { const v = view(); return ticks.map((t) => fmtT(t, v[1] - v[0], decimalsFor(incr))); } },
         { ...axis, size: Y_AXIS }],
-      cursor: { y: false, sync: { key: "lookback" }, drag: { x: true, y: false, setScale: false }, points: { show: false } },
+      cursor: { x: false, y: false, sync: { key: "lookback" }, drag: { x: true, y: false, setScale: false }, points: { show: false } },
       hooks: {
         draw: [markers, () => { this.drawnAt = performance.now(); this.waiters.splice(0).forEach((f) => f()); }],
         setSelect: [(u) => {

@@ -24,7 +24,8 @@ const L = (window.radarLookback = {
   columns: [],
   start_s: null, end_s: null,   // the range asked for (null: the recording's start / end)
   view: [0, 1],                 // the range shown (as the service answered it)
-  doc: null,                    // the last series answer
+  url: null,                    // the last series query
+  doc: null,                    // its answer
   events: [],                   // {kind, t_s, …} sorted by t_s
   cursor_s: null,
   charts: {},
@@ -153,6 +154,7 @@ async function load() {
   if (L.end_s !== null) url += `&end_s=${L.end_s}`;
   if (L.abort) L.abort.abort();
   const ac = (L.abort = new AbortController());
+  L.url = url;
   let doc;
   try {
     doc = await request(url, { signal: ac.signal });
