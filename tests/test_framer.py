@@ -341,3 +341,30 @@ def test_affine_crc_tables_match_the_bytewise_crc(poly, init, xor_out):
     assert acc.tolist() == want
     if poly == 0x1021 and init == 0xFFFF:
         assert want == [binascii.crc_hqx(row.astype(">u2").tobytes(), 0xFFFF) for row in w]
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(damaged_streams, st.integers(0, 1000), st.sampled_from([1, 7, 24, 100]),
+       st.sampled_from([1, 3, 50]))
+def test_batch_frame_ends_name_the_chunk_that_completed_each_frame(data, seed, mean, group):
+    """``feed_blocks(…, ends)`` over pieces of several chunks: each end offset points just
+    past the frame's bytes, and maps to the chunk after which the per-frame framer, fed
+    chunk by chunk, gave that frame."""
+    sizes = chunk_sizes(len(data), seed, mean)
+    cuts = np.cumsum(sizes)
+    per_frame, owner, fr, pos = [], [], Framer(), 0
+    for k, n in enumerate(sizes):
+        got = fr.feed(data[pos:pos + n])
+        per_frame += got
+        owner += [k] * len(got)
+        pos += n
+    bf, frames, ends, pos = BatchFramer(), [], [], 0
+    for g in range(0, len(sizes), group):  # several chunks per feed, as the index does
+        n = int(sum(sizes[g:g + group]))
+        blocks = bf.feed_blocks(data[pos:pos + n], ends)
+        frames += [b.astype(">u2").tobytes() for blk in blocks for b in blk]
+        pos += n
+    end = np.concatenate(ends) if ends else np.empty(0, np.int64)
+    assert frames == per_frame and bf.stream_bytes == len(data)
+    assert [data[e - 24:e] for e in end.tolist()] == per_frame
+    assert np.searchsorted(cuts, end, side="left").tolist() == owner

@@ -122,6 +122,29 @@ def test_damaged_middle_chunk_is_counted_and_skipped(tmp_path, spec):
         assert r.report.corrupt_chunks == 2 and r.report.torn_tail_bytes == 0
 
 
+def test_chunks_from_an_offset_up_to_a_limit(tmp_path, spec):
+    """``chunks(start, end)``: from a chunk boundary, never past ``end`` (the committed bytes
+    of a recording being written: a chunk written in part after it is not read)."""
+    p = tmp_path / "c.rdrlog"
+    w = RecordingWriter(p, spec)
+    for i in range(12):
+        w.write(payload(i))
+    committed = w.committed_bytes
+    with open(p, "ab") as f:  # the next chunk, half written
+        f.write(encode_chunk(payload(99), 1)[:20])
+    with RecordingReader(p) as r:
+        offs = [c.offset for c in r]
+        assert r.report.torn_tail_bytes == 20
+        got = list(r.chunks(offs[5], committed))
+        assert [c.data for c in got] == [payload(i) for i in range(5, 12)]
+        assert r.report.torn_tail_bytes == 0 and r.report.problems == []
+        assert [c.data for c in r.chunks(offs[3], offs[6])] == [payload(i) for i in (3, 4, 5)]
+        assert [c.data for c in r.chunks(offs[3], offs[6] - 1)] == [payload(3), payload(4)]
+        assert r.report.torn_tail_bytes > 0  # a limit inside a chunk: the rest is torn
+        assert list(r.chunks(committed, committed)) == []
+    w.close()
+
+
 def test_not_a_recording(tmp_path):
     p = tmp_path / "x.rdrlog"
     p.write_bytes(b"hello world")

@@ -281,10 +281,18 @@ class BatchFramer:
         self._seq_word = fmt.seq_offset // 2 if fmt.seq_offset % 2 == 0 else None
         self._seq_at = fmt.seq_offset
         self._block = self.BLOCK_FRAMES
+        #: bytes fed so far: the stream offset just past the last byte given to :meth:`feed`
+        self.stream_bytes = 0
 
     @property
     def pending(self) -> int:
         return len(self._tail)
+
+    @property
+    def pending_bytes(self) -> bytes:
+        """The bytes held back waiting for more input (fewer than one frame): feeding them
+        to a fresh framer puts it where this one stands (counters and SEQ memory aside)."""
+        return self._tail
 
     def flush(self) -> np.ndarray:
         self.stats.bytes_discarded += len(self._tail)
@@ -298,12 +306,21 @@ class BatchFramer:
             return np.empty((0, self._L // 2), dtype=np.uint16)
         return blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
 
-    def feed_blocks(self, data: bytes | bytearray | memoryview) -> list[np.ndarray]:
-        """As :meth:`feed`, but the frames come as a list of cache-sized blocks (no final copy)."""
+    def feed_blocks(self, data: bytes | bytearray | memoryview,
+                    ends: list[np.ndarray] | None = None) -> list[np.ndarray]:
+        """As :meth:`feed`, but the frames come as a list of cache-sized blocks (no final copy).
+
+        ``ends``: when given, one int64 array per block is appended to it: each frame's end
+        as a stream offset (the offset just past its last byte, counted like
+        :attr:`stream_bytes`), so a caller that knows where its chunks end can tell which
+        chunk completed each frame.
+        """
         # no copy of the input unless a partial frame waits from the last call
         buf: Any = self._tail + bytes(data) if self._tail else data
         b = np.frombuffer(buf, dtype=np.uint8)
         n, L = b.size, self._L
+        base = self.stream_bytes - len(self._tail)  # stream offset of buf[0]
+        self.stream_bytes = base + n
         last = n - L
         blocks: list[np.ndarray] = []
         pos = 0
@@ -323,9 +340,12 @@ class BatchFramer:
                                else self.MIN_BLOCK_FRAMES)
                 if k:
                     blocks.append(w[:k] if k < m else w)
+                    if ends is not None:
+                        ends.append(np.arange(1, k + 1, dtype=np.int64) * L + (base + pos))
                     pos += k * L
                     continue
-            pos = self._search(b, rows, pos, min(last + 1, pos + self.WINDOW_BYTES), blocks)
+            pos = self._search(b, rows, pos, min(last + 1, pos + self.WINDOW_BYTES), blocks,
+                               ends, base)
         self._tail = bytes(buf[pos:])
         for w in blocks:
             self.stats.frames += w.shape[0]
@@ -335,11 +355,13 @@ class BatchFramer:
         return blocks
 
     def _search(self, b: np.ndarray, rows: np.ndarray, pos: int, limit: int,
-                blocks: list[np.ndarray]) -> int:
+                blocks: list[np.ndarray], ends: list[np.ndarray] | None = None,
+                base: int = 0) -> int:
         """Examine positions [pos, limit) byte by byte; return the next position to examine.
 
-        Appends accepted frames to ``blocks`` and counts errors and discarded
-        bytes exactly as the per-frame framer would.
+        Appends accepted frames to ``blocks`` (and their stream end offsets, ``base`` + end
+        in ``b``, to ``ends`` when given) and counts errors and discarded bytes exactly as
+        the per-frame framer would.
         """
         L, st = self._L, self.stats
         hi, lo = self._sync >> 8, self._sync & 0xFF
@@ -378,4 +400,6 @@ class BatchFramer:
         st.bytes_discarded += end - pos - L * apos.size
         if apos.size:
             blocks.append(w[accepted_mask])
+            if ends is not None:
+                ends.append(apos.astype(np.int64) + (base + L))
         return end

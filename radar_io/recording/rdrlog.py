@@ -328,18 +328,26 @@ class RecordingReader:
 
     def __iter__(self) -> Iterator[Chunk]:
         """Good chunks in file order, from the start; see :attr:`report` afterwards."""
+        return self.chunks()
+
+    def chunks(self, start: int | None = None, end: int | None = None) -> Iterator[Chunk]:
+        """Good chunks in file order from file offset ``start`` (a chunk boundary; default:
+        the first chunk) up to offset ``end`` (default: the file size; e.g. the
+        ``committed_bytes`` of a recording still being written); bytes past ``end`` are
+        never read. See :attr:`report` afterwards."""
         self.report = rep = ReadReport()
         f = self._f
-        f.seek(self.data_offset)
-        off = self.data_offset
+        off = self.data_offset if start is None else start
+        size = self.size if end is None else min(end, self.size)
+        f.seek(off)
         hsize = self._head.size
         while True:
-            head = f.read(hsize)
+            head = f.read(max(0, min(hsize, size - off)))
             if not head:
                 return
-            if len(head) == hsize:
+            if len(head) == hsize and off + hsize <= size:
                 magic, t_ns, mono_ns, length, crc = self._unpack(head)
-                if magic == self._magic and length <= MAX_CHUNK:
+                if magic == self._magic and length <= MAX_CHUNK and off + hsize + length <= size:
                     payload = f.read(length)
                     if len(payload) == length and self._crc(t_ns, mono_ns, payload) == crc:
                         rep.chunks += 1
@@ -347,13 +355,13 @@ class RecordingReader:
                         yield Chunk(t_ns, payload, off, mono_ns, hsize)
                         off += hsize + length
                         continue
-            elif off + len(head) >= self.size:
-                self._torn(off, rep)
+            elif off + len(head) >= size:
+                self._torn(off, rep, size)
                 return
             # damaged chunk: hunt for the next chunk that validates
-            nxt = self._resync(off + 1)
+            nxt = self._resync(off + 1, size)
             if nxt is None:
-                self._torn(off, rep)
+                self._torn(off, rep, size)
                 return
             rep.corrupt_chunks += 1
             rep.skipped_bytes += nxt - off
@@ -361,34 +369,35 @@ class RecordingReader:
             off = nxt
             f.seek(off)
 
-    def _torn(self, off: int, rep: ReadReport) -> None:
-        rep.torn_tail_bytes = self.size - off
-        rep.problems.append(f"torn tail: last {self.size - off} bytes (an incomplete chunk) skipped")
+    def _torn(self, off: int, rep: ReadReport, size: int) -> None:
+        rep.torn_tail_bytes = size - off
+        rep.problems.append(f"torn tail: last {size - off} bytes (an incomplete chunk) skipped")
 
-    def _resync(self, start: int) -> int | None:
-        """Offset of the next chunk at or after ``start`` whose CRC checks, or None."""
+    def _resync(self, start: int, size: int) -> int | None:
+        """Offset of the next chunk at or after ``start`` whose CRC checks and which ends by
+        ``size``, or None."""
         f = self._f
         pos = start
         window = 1 << 20
-        while pos < self.size:
+        while pos < size:
             f.seek(pos)
             buf = f.read(window + 3)
             i = buf.find(self._magic)
             while i >= 0:
-                if self._valid_at(pos + i):
+                if self._valid_at(pos + i, size):
                     return pos + i
                 i = buf.find(self._magic, i + 1)
             pos += window
         return None
 
-    def _valid_at(self, off: int) -> bool:
+    def _valid_at(self, off: int, size: int) -> bool:
         f = self._f
         f.seek(off)
         head = f.read(self._head.size)
         if len(head) < self._head.size:
             return False
         magic, t_ns, mono_ns, length, crc = self._unpack(head)
-        if magic != self._magic or length > MAX_CHUNK:
+        if magic != self._magic or length > MAX_CHUNK or off + self._head.size + length > size:
             return False
         payload = f.read(length)
         return len(payload) == length and self._crc(t_ns, mono_ns, payload) == crc

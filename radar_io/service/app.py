@@ -3,7 +3,7 @@
 air data) start and stop in the lifespan.
 
 Routers, one per concern (``service/routers/``): status, live (track, ws, site, path,
-airdata), recordings, replay, calibration, coordinates, runway, alarms, report. Errors: one body shape, radar_io
+airdata), recordings, series (look-back), replay, calibration, coordinates, runway, alarms, report. Errors: one body shape, radar_io
 errors mapped by class (:mod:`radar_io.service.errors`). Origin, header and body limits:
 :mod:`radar_io.service.guard`.
 """
@@ -39,7 +39,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
     from radar_io.service.alarms import attach_alarms, status_loop
     from radar_io.service.routers import (alarms, calibration, coordinates, live, recordings,
-                                          replay, report, runway, status)
+                                          replay, report, runway, series, status)
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     state = ServiceState(cfg)
@@ -64,7 +64,8 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
                   '`{"detail": [{"loc": [...], "msg": "...", "type": "..."}]}`.')
     app.state.service = state
     install_error_handlers(app)
-    for module in (status, live, recordings, replay, calibration, coordinates, alarms, report):
+    for module in (status, live, recordings, series, replay, calibration, coordinates, alarms,
+                   report):
         app.include_router(module.router)
     # the runway router declares its own token dependencies (the manual pose needs none)
     app.include_router(runway.router, responses=responses(401, 403, 429))

@@ -1,0 +1,88 @@
+"""Look back over whole recordings without replaying them: decimated min/max series of any
+column and the recording's events, from the recording's look-back index
+(:mod:`radar_io.analysis.series`, docs/lookback.md)."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from fastapi import APIRouter, Depends, Path, Query
+from fastapi.responses import Response
+from pydantic import BaseModel, ConfigDict, Field
+
+from radar_io.service.errors import responses
+from radar_io.service.routers.deps import get_state
+from radar_io.service.state import ID_PATTERN, ServiceState
+
+router = APIRouter(tags=["recordings"])
+
+#: dependencies of the expensive look-back requests: the per-kind limiter (kind "series",
+#: 429 + Retry-After) is attached here, for both routes
+EXPENSIVE: list[Any] = []
+_ERRORS = responses(404, 422, 429, 507)
+COLUMNS_PATTERN = r"^[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*$"
+
+
+class MinMax(BaseModel):
+    min: list[float | None] = Field(description="per bucket (or frame); null: no value")
+    max: list[float | None]
+
+
+class SeriesAnswer(BaseModel):
+    start_s: float = Field(description="range used, s since the first chunk (clamped)")
+    end_s: float
+    decimated: bool = Field(description="true: `points` equal buckets; false: every frame")
+    frames: int = Field(description="frames in the range")
+    t_s: list[float] = Field(description="bucket starts, or each frame's time")
+    columns: dict[str, MinMax]
+
+
+class Event(BaseModel):
+    model_config = ConfigDict(extra="allow")
+
+    kind: str = Field(description="go_rise, go_fall, sync, or the event log's kind (alarm …)")
+    t_s: float | None = Field(description="s since the first chunk (monotonic receive time)")
+    t_ns: int = Field(description="wall-clock receive time, ns since the Unix epoch (a label)")
+
+
+class EventsAnswer(BaseModel):
+    events: list[Event]
+
+
+def _json(doc: dict[str, Any]) -> Response:
+    return Response(json.dumps(doc, separators=(",", ":"), allow_nan=False),
+                    media_type="application/json")
+
+
+@router.get("/api/recordings/{rec_id}/series", dependencies=EXPENSIVE, response_model=None,
+            responses={200: {"model": SeriesAnswer}, **_ERRORS})
+def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+           columns: str = Query(pattern=COLUMNS_PATTERN, max_length=2000,
+                                description="comma-separated column names, e.g. h_m,dy_m"),
+           start_s: float | None = Query(None, ge=0.0, allow_inf_nan=False,
+                                         description="range start, s (default: 0)"),
+           end_s: float | None = Query(None, ge=0.0, allow_inf_nan=False,
+                                       description="range end, s (default: the last frame)"),
+           points: int = Query(1000, ge=1, le=10000, description="buckets"),
+           state: ServiceState = Depends(get_state)) -> Response:
+    """Min / max of columns over a time range of a recording (closed, or still being written:
+    up to its last whole chunk). Time: seconds since the recording's first chunk on the
+    monotonic receive time; each frame has the time of the chunk that completed it. More
+    than `points` frames in the range: `points` equal buckets (numpy.histogram's: each
+    [start, next start), the last one closed), `t_s` their starts, min / max over the
+    non-null samples of each (null: no value). Otherwise every frame (min = max). The
+    first query of a recording builds its index (docs/lookback.md)."""
+    idx, end = state.lookback.index(rec_id)
+    return _json(idx.series(columns.split(","), start_s, end_s, points, end=end))
+
+
+@router.get("/api/recordings/{rec_id}/events", dependencies=EXPENSIVE, response_model=None,
+            responses={200: {"model": EventsAnswer}, **_ERRORS})
+def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+           state: ServiceState = Depends(get_state)) -> Response:
+    """GO edges (`go_rise`, `go_fall`) and SYNC 0→1 edges (`sync`, with `seq`, `tod_s`) of a
+    recording, and the records of its event log (alarms, clock steps, annotations), by
+    time on the series' axis."""
+    idx, end = state.lookback.index(rec_id)
+    return _json({"events": idx.events(end=end)})

@@ -1,0 +1,104 @@
+"""``GET /api/recordings/{id}/series`` and ``/events`` on a real service (uvicorn on port 0):
+answers equal numpy over ``decode_bytes``; the recording being written is queryable and
+grows; a recording that closes gets its index from the service's worker; bad requests
+answer 404 / 422 in the one error shape."""
+
+from __future__ import annotations
+
+import json
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+
+from radar_io.analysis.series import SeriesOptions, index_dir
+from radar_io.coordinates.reference_path import load_path
+from radar_io.coordinates.transforms import load_site
+from radar_io.decoding.biases import Calibration
+from test_series_index import PATH_FILE, check, expected, reference, simulated_chunks, \
+    write_recording
+
+from .liveserver import TOKEN, live_server, service_config
+
+
+def get(base: str, path: str) -> tuple[int, dict]:
+    try:
+        with urllib.request.urlopen(base + path, timeout=60) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as exc:
+        return exc.code, json.loads(exc.read())
+
+
+def test_series_and_events_of_a_recording(tmp_path, spec):
+    cfg = service_config(tmp_path / "svc", auto_record="manual", path=str(PATH_FILE))
+    recs = Path(cfg.data_dir) / "recordings"
+    recs.mkdir(parents=True)
+    chunks = simulated_chunks(spec, 20.0, seed=11)
+    write_recording(recs / "flight.rdrlog", spec, chunks).close()
+    options = SeriesOptions(spec, Calibration(), load_site("demo"), load_path(PATH_FILE))
+    t, cols = reference(spec, chunks, options)
+    with live_server(cfg) as srv:
+        names = ["h_m", "dy_m", "lat_deg", "seq", "rx_good"]
+        for q, (s, e, p) in {"": (None, None, 1000),
+                             "&start_s=2.5&end_s=17&points=333": (2.5, 17.0, 333),
+                             "&start_s=4&end_s=4.1&points=1000": (4.0, 4.1, 1000),
+                             "&start_s=0&end_s=1e9&points=10000": (0.0, 1e9, 10000)}.items():
+            status, body = get(srv.base, f"/api/recordings/flight/series?columns={','.join(names)}{q}")
+            assert status == 200, body
+            check(body, expected(t, cols, names, s, e, p), p)
+        assert body["decimated"] is True and len(body["t_s"]) == 10000
+        status, body = get(srv.base, "/api/recordings/flight/series?columns=h_m&start_s=4&end_s=4.1")
+        assert body["decimated"] is False and body["frames"] == len(body["t_s"]) > 50
+
+        status, body = get(srv.base, "/api/recordings/flight/events")
+        assert status == 200
+        kinds = [e["kind"] for e in body["events"]]
+        assert kinds.count("go_rise") == 1 and kinds.count("sync") >= 30
+        assert all(set(e) >= {"kind", "t_s", "t_ns", "seq", "tod_s"} for e in body["events"])
+
+        for path, code, words in [
+                ("/api/recordings/nope/series?columns=h_m", 404, "nope"),
+                ("/api/recordings/nope/events", 404, "nope"),
+                ("/api/recordings/flight/series?columns=h_m,wind_mps", 422, "wind_mps"),
+                ("/api/recordings/flight/series?columns=h_m&start_s=9&end_s=3", 422, "after"),
+                ("/api/recordings/flight/series?columns=h_m&points=0", 422, ""),
+                ("/api/recordings/flight/series?columns=h_m&points=10001", 422, ""),
+                ("/api/recordings/flight/series?columns=h_m&start_s=nan", 422, ""),
+                ("/api/recordings/flight/series?columns=h_m;x", 422, ""),
+                ("/api/recordings/flight/series", 422, "")]:
+            status, body = get(srv.base, path)
+            assert status == code, (path, body)
+            assert words in body["detail"][0]["msg"]
+
+
+def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_path):
+    cfg = service_config(tmp_path / "svc", auto_record="manual")
+    with live_server(cfg) as srv:
+        srv.wait_connected()
+        status, body = srv.request("POST", "/api/recordings/start", token=TOKEN)
+        assert status == 200
+        rec = body["recording"]
+        frames = []
+        for _ in range(3):
+            time.sleep(1.0)
+            status, body = get(srv.base, f"/api/recordings/{rec}/series?columns=h_m,sync&points=50")
+            assert status == 200, body
+            frames.append(body["frames"])
+            assert body["decimated"] is (body["frames"] > 50)
+        assert 0 < frames[0] < frames[1] < frames[2]
+        path = Path(cfg.data_dir) / "recordings" / f"{rec}.rdrlog"
+        assert srv.request("POST", "/api/recordings/stop", token=TOKEN)[0] == 200
+        man = index_dir(path) / "manifest.json"
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:  # the service's worker indexes the closed file
+            if man.exists() and json.loads(man.read_text())["recording"]["scanned_bytes"] \
+                    == path.stat().st_size:
+                break
+            time.sleep(0.1)
+        else:
+            raise AssertionError("the closed recording was not indexed")
+        status, body = get(srv.base, f"/api/recordings/{rec}/series?columns=h_m&points=50")
+        assert body["frames"] > frames[2]
+        assert np.all(np.diff(body["t_s"]) > 0)
