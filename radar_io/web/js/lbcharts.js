@@ -1,6 +1,6 @@
 // Look-back strip charts (uPlot): one chart per column over the chosen time range, the
-// min / max band of each bucket from GET /api/recordings/{id}/series, GO / SYNC / alarm /
-// clock-step markers, drag to zoom, double-click for the whole recording, a cursor line
+// min / max band of each bucket from GET /api/recordings/{id}/series, GO (rise solid, fall
+// dashed) / SYNC / alarm / clock-step markers, drag to zoom, double-click for the whole recording, a cursor line
 // shared by every chart. X axis: seconds since the recording's first chunk.
 import uPlot from "../vendor/uPlot.esm.js";
 
@@ -9,7 +9,14 @@ const CHART_H = 150, Y_AXIS = 64, PAD = [10, 24, 0, 0];
 /** CSS px of a chart's plot area (the padding and the y axis are fixed for that). */
 export const PLOT_W = CHART_W - Y_AXIS - PAD[1] - PAD[3];
 const COLORS = ["#3b82f6", "#d29922", "#2ea043", "#f778ba", "#a371f7", "#da3633"];
-export const EVENT_COLORS = { go: "#2ea043", sync: "#d29922", alarm: "#da3633", clock_step: "#f778ba" };
+/** Marker colour of an event kind: go_rise / go_fall green, sync amber, alarm… red, clock… pink. */
+export function eventColor(kind) {
+  if (kind.startsWith("go")) return "#2ea043";
+  if (kind === "sync") return "#d29922";
+  if (kind.includes("alarm")) return "#da3633";
+  if (kind.includes("clock")) return "#f778ba";
+  return "#7a8494";
+}
 
 /** Decimals that show a step (s) exactly, or that resolve a twentieth of a span. */
 export function decimalsFor(step) {
@@ -20,10 +27,18 @@ export function decimalsFor(step) {
 /** "1:02:03.5" (spans of 10 min and more) or "62.125 s": a time since the start with d decimals. */
 export function fmtT(t, span, d = decimalsFor(+(span / 20).toPrecision(1))) {
   if (span < 600) return `${t.toFixed(d)} s`;
-  const h = Math.floor(t / 3600), m = Math.floor((t % 3600) / 60), s = t % 60;
+  const r = Number(t.toFixed(d)), h = Math.floor(r / 3600), m = Math.floor((r % 3600) / 60), s = r - 3600 * h - 60 * m;
   const ss = s.toFixed(d).padStart(d ? d + 3 : 2, "0");
   return h ? `${h}:${String(m).padStart(2, "0")}:${ss}` : `${m}:${ss}`;
 }
+
+/** The gaps (canvas px) to leave in a line: nulls wider than 3 CSS px. Narrower ones are
+ * empty buckets narrower than the recording's chunks (each frame has the time of the chunk
+ * that completed it) or sub-pixel dropouts: drawn through. */
+const wideGaps = (u, sidx, i0, i1, gaps) => gaps.filter(([a, b]) => b - a > 3 * devicePixelRatio);
+
+/** More SYNC edges than this in the view: drawn as ticks at the top, not across the chart. */
+const SYNC_LINES = 60;
 
 /** The first index with arr[i] >= v (arr ascending). */
 export function lowerBound(arr, v, key = (x) => x) {
@@ -63,10 +78,10 @@ export class ColumnChart {
     this.u = new uPlot({
       width: CHART_W, height: CHART_H, legend: { show: false }, padding: PAD,
       scales: { x: { time: false, range: () => view() } },
-      series: [{}, { label: `${column} min`, stroke: color, width: 1, spanGaps: false },
-        { label: `${column} max`, stroke: color, width: 1, spanGaps: false }],
+      series: [{}, { label: `${column} min`, stroke: color, width: 1, gaps: wideGaps },
+        { label: `${column} max`, stroke: color, width: 1, gaps: wideGaps }],
       bands: [{ series: [2, 1], fill: color + "55" }],
-      axes: [{ ...axis, values: (u, ticks, _a, _s, incr) => { const v = view(); return ticks.map((t) => fmtT(t, v[1] - v[0], decimalsFor(incr))); } },
+      axes: [{ ...axis, space: 90, values: (u, ticks, _a, _s, incr) => { const v = view(); return ticks.map((t) => fmtT(t, v[1] - v[0], decimalsFor(incr))); } },
         { ...axis, size: Y_AXIS }],
       cursor: { x: false, y: false, sync: { key: "lookback" }, drag: { x: true, y: false, setScale: false }, points: { show: false } },
       hooks: {
@@ -99,14 +114,20 @@ export class ColumnChart {
   /** Vertical lines at the events inside the view (SYNC thin, the others thick). */
   drawMarkers(u, events) {
     const ctx = u.ctx, { left, top, width, height } = u.bbox, [v0, v1] = [u.scales.x.min, u.scales.x.max];
+    const i0 = lowerBound(events, v0, (e) => e.t_s), i1 = lowerBound(events, v1 + 1e-9, (e) => e.t_s);
+    let syncs = 0;
+    for (let i = i0; i < i1; i++) if (events[i].kind === "sync") syncs++;
+    const tick = 6 * devicePixelRatio;
     ctx.save();
     ctx.beginPath(); ctx.rect(left, top, width, height); ctx.clip();
-    for (let i = lowerBound(events, v0, (e) => e.t_s); i < events.length && events[i].t_s <= v1; i++) {
+    for (let i = i0; i < i1; i++) {
       const e = events[i], x = Math.round(u.valToPos(e.t_s, "x", true)) + 0.5;
-      ctx.strokeStyle = EVENT_COLORS[e.kind] || "#7a8494";
+      const bottom = e.kind === "sync" && syncs > SYNC_LINES ? top + tick : top + height;
+      ctx.strokeStyle = eventColor(e.kind);
       ctx.globalAlpha = e.kind === "sync" ? 0.55 : 0.95;
       ctx.lineWidth = (e.kind === "sync" ? 1 : 2) * devicePixelRatio;
-      ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
+      ctx.setLineDash(e.kind === "go_fall" ? [4 * devicePixelRatio, 3 * devicePixelRatio] : []);
+      ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, bottom); ctx.stroke();
     }
     ctx.restore();
   }

@@ -15,6 +15,7 @@ import * as replay from "./replays.js";
 export const DEFAULT_COLUMNS = ["sr_m", "el_deg", "h_m"];
 const TRACK = ["x_m", "y_m", "h_m"];   // the plan and profile views
 const MAX_SYNC_MARKS = 100;            // more SYNC edges in the range: not marked on the plan
+const BRIDGE = 2;                      // empty buckets in a row the track is drawn through
 const FALLBACK_COLUMNS = ["seq", "tod_s", "sr_m", "dsr_m", "el_deg", "del_deg", "az_deg", "daz_deg",
   "sr_c_m", "el_c_deg", "az_c_deg", "x_m", "y_m", "h_m", "go", "rx_good", "sync", "auto"];
 
@@ -70,7 +71,6 @@ export async function openLookback(v, push = true) {
   L.active = true;
   L.recording = v.recording;
   L.start_s = v.start_s ?? null; L.end_s = v.end_s ?? null;
-  document.body.classList.add("lookback");
   $("lookback").hidden = false; $("live-view").hidden = true;
   $("to-live").hidden = false; $("to-lookback").hidden = true;
   const cols = v.columns && v.columns.length ? v.columns : (L.columns.length ? L.columns : DEFAULT_COLUMNS);
@@ -90,7 +90,6 @@ export function closeLookback(push = true) {
   L.active = false;
   L.gen++;
   if (L.abort) L.abort.abort();
-  document.body.classList.remove("lookback");
   $("lookback").hidden = true; $("live-view").hidden = false;
   $("to-live").hidden = true; $("to-lookback").hidden = false;
   if (push && location.search) history.pushState(null, "", location.pathname);
@@ -136,7 +135,7 @@ async function loadEvents() {
   try {
     const doc = await getJSON(`/api/recordings/${encodeURIComponent(rec)}/events`);
     if (rec !== L.recording) return;
-    L.events = [...doc.events].sort((a, b) => a.t_s - b.t_s);
+    L.events = doc.events.filter((e) => typeof e.t_s === "number").sort((a, b) => a.t_s - b.t_s);
     for (const ch of Object.values(L.charts)) ch.u.redraw(false, false);
     renderTrack();
   } catch (e) {
@@ -175,8 +174,9 @@ async function load() {
   renderTrack();
   const t2 = performance.now();
   const span = doc.end_s - doc.start_s;
-  $("lb-range").textContent = `${fmtT(doc.start_s, span)} – ${fmtT(doc.end_s, span)} (${fmtT(span, span)}, ` +
-    `${doc.t_s.length} ${doc.decimated ? "buckets" : "frames"})`;
+  const n = doc.frames ?? doc.t_s.length;
+  $("lb-range").textContent = `${fmtT(doc.start_s, span)} – ${fmtT(doc.end_s, span)} (${fmtT(span, span)}: ` +
+    `${n.toLocaleString("en")} frames${doc.decimated ? ` in ${doc.t_s.length} buckets` : ""})`;
   L.timings.push({ start_s: doc.start_s, end_s: doc.end_s, points, values: doc.t_s.length,
     decimated: doc.decimated, fetch_ms: t1 - t0, draw_ms: t2 - t1, total_ms: t2 - t0 });
   L.loads++;
@@ -238,10 +238,21 @@ function renderTrack() {
       const p = { x: mid(x, i), y: mid(y, i), h: mid(h, i) };
       L.track.push(p.x === null || p.y === null || p.h === null ? null : { ...p, g: Math.hypot(p.x, p.y), sync: false });
     }
+    // as on the charts: runs of up to BRIDGE empty buckets are drawn through (the track
+    // keeps its indices: null there only breaks the line)
+    if (d.decimated) L.track = L.track.map((p, i) => p || (nullRun(L.track, i) <= BRIDGE ? undefined : null));
     const syncs = L.events.filter((e) => e.kind === "sync" && e.t_s >= L.view[0] && e.t_s <= L.view[1]);
     if (syncs.length <= MAX_SYNC_MARKS) for (const e of syncs) { const p = L.track[indexAt(e.t_s)]; if (p) p.sync = true; }
   }
   renderCursor();
+}
+
+/** The length of the run of nulls / undefined around index i. */
+function nullRun(a, i) {
+  let lo = i, hi = i;
+  while (lo > 0 && !a[lo - 1]) lo--;
+  while (hi < a.length - 1 && !a[hi + 1]) hi++;
+  return hi - lo + 1;
 }
 
 function drawTrack(i) {
