@@ -32,11 +32,6 @@ export function fmtT(t, span, d = decimalsFor(+(span / 20).toPrecision(1))) {
   return h ? `${h}:${String(m).padStart(2, "0")}:${ss}` : `${m}:${ss}`;
 }
 
-/** The gaps (canvas px) to leave in a line: nulls wider than 3 CSS px. Narrower ones are
- * empty buckets narrower than the recording's chunks (each frame has the time of the chunk
- * that completed it) or sub-pixel dropouts: drawn through. */
-const wideGaps = (u, sidx, i0, i1, gaps) => gaps.filter(([a, b]) => b - a > 3 * devicePixelRatio);
-
 /** More SYNC edges than this in the view: drawn as ticks at the top, not across the chart. */
 const SYNC_LINES = 60;
 
@@ -78,8 +73,8 @@ export class ColumnChart {
     this.u = new uPlot({
       width: CHART_W, height: CHART_H, legend: { show: false }, padding: PAD,
       scales: { x: { time: false, range: () => view() } },
-      series: [{}, { label: `${column} min`, stroke: color, width: 1, gaps: wideGaps },
-        { label: `${column} max`, stroke: color, width: 1, gaps: wideGaps }],
+      series: [{}, { label: `${column} min`, stroke: color, width: 1, spanGaps: false },
+        { label: `${column} max`, stroke: color, width: 1, spanGaps: false }],
       bands: [{ series: [2, 1], fill: color + "55" }],
       axes: [{ ...axis, space: 90, values: (u, ticks, _a, _s, incr) => { const v = view(); return ticks.map((t) => fmtT(t, v[1] - v[0], decimalsFor(incr))); } },
         { ...axis, size: Y_AXIS }],

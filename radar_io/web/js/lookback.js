@@ -15,7 +15,7 @@ import * as replay from "./replays.js";
 export const DEFAULT_COLUMNS = ["sr_m", "el_deg", "h_m"];
 const TRACK = ["x_m", "y_m", "h_m"];   // the plan and profile views
 const MAX_SYNC_MARKS = 100;            // more SYNC edges in the range: not marked on the plan
-const BRIDGE = 2;                      // empty buckets in a row the track is drawn through
+const PRESENT = "seq";                 // never null in a frame: null only in an empty bucket
 const FALLBACK_COLUMNS = ["seq", "tod_s", "sr_m", "dsr_m", "el_deg", "del_deg", "az_deg", "daz_deg",
   "sr_c_m", "el_c_deg", "az_c_deg", "x_m", "y_m", "h_m", "go", "rx_good", "sync", "auto"];
 
@@ -27,6 +27,7 @@ const L = (window.radarLookback = {
   view: [0, 1],                 // the range shown (as the service answered it)
   url: null,                    // the last series query
   doc: null,                    // its answer
+  data: null,                   // {t_s, columns}: the answer without its empty buckets
   events: [],                   // {kind, t_s, …} sorted by t_s
   cursor_s: null,
   charts: {},
@@ -147,7 +148,7 @@ async function loadEvents() {
 async function load() {
   const gen = ++L.gen, t0 = performance.now(), charts = L.columns.map((c) => L.charts[c]);
   const points = Math.max(2, Math.floor(Math.min(PLOT_W, ...charts.map((c) => c.plotWidth || PLOT_W))));
-  const cols = [...new Set([...L.columns, ...TRACK])];
+  const cols = [...new Set([...L.columns, ...TRACK, PRESENT])];
   let url = `/api/recordings/${encodeURIComponent(L.recording)}/series?columns=${cols.join(",")}&points=${points}`;
   if (L.start_s !== null) url += `&start_s=${L.start_s}`;
   if (L.end_s !== null) url += `&end_s=${L.end_s}`;
@@ -165,11 +166,12 @@ async function load() {
   const t1 = performance.now();
   $("lb-msg").textContent = "";
   L.doc = doc;
+  L.data = withoutEmptyBuckets(doc);
   L.view = [doc.start_s, doc.end_s];
-  const empty = [];
+  const none = { min: [], max: [] };
   await Promise.all(charts.map((ch) => {
-    const c = doc.columns[ch.column] || { min: empty, max: empty };
-    return ch.setData(doc.t_s, c.min, c.max);
+    const c = L.data.columns[ch.column] || none;
+    return ch.setData(L.data.t_s, c.min, c.max);
   }));
   renderTrack();
   const t2 = performance.now();
@@ -182,12 +184,28 @@ async function load() {
   L.loads++;
 }
 
+/** The answer without the buckets that hold no frame (PRESENT null). Frames carry the time
+ * of the chunk that completed them, so a view zoomed to a few chunks has many empty buckets:
+ * lines and the track go straight across them, and break only at null values of frames that
+ * exist (NG rows of the coordinate columns). */
+export function withoutEmptyBuckets(doc) {
+  const p = doc.columns[PRESENT];
+  if (!p || !doc.decimated) return doc;
+  const keep = [];
+  p.min.forEach((v, i) => { if (v !== null) keep.push(i); });
+  const pick = (a) => keep.map((i) => a[i]);
+  const columns = {};
+  for (const [c, v] of Object.entries(doc.columns)) columns[c] = { min: pick(v.min), max: pick(v.max) };
+  return { ...doc, t_s: pick(doc.t_s), columns };
+}
+
 // ------------------------------------------------------------------------------ cursor
-/** The index of the bucket (or frame) holding t_s in the last answer, or -1. */
+/** The index of the bucket holding t_s (or the last one with frames before it), or of the
+ * nearest frame, in L.data; -1: none. */
 function indexAt(t_s) {
-  const t = L.doc ? L.doc.t_s : [];
+  const t = L.data ? L.data.t_s : [];
   if (!t.length || t_s === null) return -1;
-  if (L.doc.decimated) return Math.min(Math.max(lowerBound(t, t_s + 1e-12) - 1, 0), t.length - 1);
+  if (L.data.decimated) return Math.min(Math.max(lowerBound(t, t_s + 1e-12) - 1, 0), t.length - 1);
   const i = lowerBound(t, t_s); // the nearest frame
   return i === 0 ? 0 : i === t.length || t_s - t[i - 1] < t[i] - t_s ? i - 1 : i;
 }
@@ -210,7 +228,7 @@ export function setCursor(t_s) {
 
 function renderCursor() {
   cursorQueued = false;
-  const i = indexAt(L.cursor_s), cols = L.doc ? L.doc.columns : {}, span = L.view[1] - L.view[0];
+  const i = indexAt(L.cursor_s), cols = L.data ? L.data.columns : {}, span = L.view[1] - L.view[0];
   for (const ch of Object.values(L.charts)) ch.showCursor(L.cursor_s, i < 0 ? "" : `${valueText(cols[ch.column], i)}`);
   const d = decimalsFor(+(span / PLOT_W).toPrecision(1)); // to a pixel
   $("lb-cursor").textContent = L.cursor_s === null ? "" : `t = ${fmtT(L.cursor_s, span, d)}`;
@@ -230,7 +248,7 @@ function follow(t_s) {
 }
 
 function renderTrack() {
-  const d = L.doc;
+  const d = L.data;
   L.track = [];
   if (d && TRACK.every((c) => d.columns[c])) {
     const [x, y, h] = TRACK.map((c) => d.columns[c]);
@@ -238,21 +256,10 @@ function renderTrack() {
       const p = { x: mid(x, i), y: mid(y, i), h: mid(h, i) };
       L.track.push(p.x === null || p.y === null || p.h === null ? null : { ...p, g: Math.hypot(p.x, p.y), sync: false });
     }
-    // as on the charts: runs of up to BRIDGE empty buckets are drawn through (the track
-    // keeps its indices: null there only breaks the line)
-    if (d.decimated) L.track = L.track.map((p, i) => p || (nullRun(L.track, i) <= BRIDGE ? undefined : null));
     const syncs = L.events.filter((e) => e.kind === "sync" && e.t_s >= L.view[0] && e.t_s <= L.view[1]);
     if (syncs.length <= MAX_SYNC_MARKS) for (const e of syncs) { const p = L.track[indexAt(e.t_s)]; if (p) p.sync = true; }
   }
   renderCursor();
-}
-
-/** The length of the run of nulls / undefined around index i. */
-function nullRun(a, i) {
-  let lo = i, hi = i;
-  while (lo > 0 && !a[lo - 1]) lo--;
-  while (hi < a.length - 1 && !a[hi + 1]) hi++;
-  return hi - lo + 1;
 }
 
 function drawTrack(i) {

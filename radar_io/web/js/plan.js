@@ -27,13 +27,11 @@ export async function loadReferenceCourse() {
   }
 }
 
-/** Stroke a polyline of points {x, y, …} through P: null breaks the line, undefined is
- * skipped (the line goes on to the next point). */
+/** Stroke a polyline of points {x, y, …} (null breaks the line) through P. */
 export function polyline(g, pts, P, key = (p) => P(p.x, p.y)) {
   g.beginPath();
   let pen = false;
   for (const p of pts) {
-    if (p === undefined) continue;
     if (!p) { pen = false; continue; }
     const q = key(p);
     if (pen) g.lineTo(q[0], q[1]); else g.moveTo(q[0], q[1]);
