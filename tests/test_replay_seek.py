@@ -33,7 +33,7 @@ def test_backward_seek_adds_no_gap_and_no_edge(tmp_path, spec):
         for k in range(0, len(data), CHUNK):
             w.write(data[k:k + CHUNK], t_ns=1_000_000 * (k // CHUNK))
     rec = Recorder(tmp_path / "data", spec, None, "test", auto="manual")
-    rec.enabled = False  # replayed bytes are not recorded again; its sync index shows the edges
+    rec.enabled = False  # records nothing; its sync index shows the edges
     acq = Pipeline(f"replay://{p}?speed=0", spec, History(), lambda _m: None, recorder=rec)
     src = acq.source
     src.pause()

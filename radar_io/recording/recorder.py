@@ -78,7 +78,7 @@ class Recorder:
         self._writer: RecordingWriter | None = None
         self._lock = threading.Lock()
         self._manual = False
-        self.enabled = True  # False while replaying: replayed bytes are not recorded again
+        self.enabled = True  # False: chunks and GO edges are ignored (nothing is recorded)
         #: called with the path of each recording that closed cleanly (e.g. the archiver)
         self.on_closed: Callable[[Path], None] | None = None
         self.sync_events: list[SyncEvent] = []
@@ -265,16 +265,6 @@ class Recorder:
         return {"free_bytes": free, "low_space": free is not None and free < self.low_space_bytes,
                 "low_space_bytes": self.low_space_bytes, "last_error": self.storage_error,
                 "errors": self.storage_errors}
-
-    def resume_live(self) -> None:
-        """Back from a replay: recording is enabled again (and restarts in ``always`` mode)."""
-        self.enabled = True
-        with self._lock:
-            self._pre.clear()
-            self._pre_bytes = 0
-        if self.auto == "always":
-            self._want = "always"
-            self._try_auto()
 
     @property
     def current(self) -> str | None:

@@ -167,7 +167,7 @@ class ReplaySessions:
             raise NotFoundError(f"no replay session {sid!r}")
         return s
 
-    def list(self) -> list[ReplaySession]:
+    def running(self) -> list[ReplaySession]:
         with self._lock:
             return list(self._sessions.values())
 
@@ -180,12 +180,12 @@ class ReplaySessions:
         return s
 
     def brief(self) -> list[dict[str, Any]]:
-        return [s.brief() for s in self.list()]
+        return [s.brief() for s in self.running()]
 
     def reap(self, now: float | None = None) -> list[str]:
         """End the sessions nobody watched for ``idle_s``; their ids."""
         now = time.monotonic() if now is None else now
-        ended = [s.id for s in self.list() if s.idle_s(now) >= self.idle_s]
+        ended = [s.id for s in self.running() if s.idle_s(now) >= self.idle_s]
         for sid in ended:
             try:
                 self.delete(sid)
@@ -208,7 +208,7 @@ class ReplaySessions:
         self._stop.set()
         if self._reaper is not None:
             self._reaper.join(5)
-        for s in self.list():
+        for s in self.running():
             try:
                 self.delete(s.id)
             except NotFoundError:

@@ -32,6 +32,7 @@ from radar_io.service.history import History
 from radar_io.service.hub import Hub
 from radar_io.service.pipeline import Pipeline, Processor
 from radar_io.service.sessions import ReplaySessions
+from radar_io.sources import source_kind
 from radar_io.wirespec.frame import load_spec
 
 log = logging.getLogger("radar_io.service")
@@ -81,11 +82,12 @@ class ServiceState:
                 raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
                                   f"{exc.strerror}") from exc
         self.runway_jobs: Any = None  # RunwayJobs, created by the runway router on first use
-        ground_replay = True if cfg.source.startswith("replay:") else None
-        #: the live pipeline: the one with the recorder, sinks, alarms, sync index and MQTT
+        #: the live pipeline: the one with the recorder, sinks, alarms, sync index and MQTT;
+        #: ``serve --source replay://`` marks its messages ``"replay": true``
+        ground_replay = source_kind(cfg.source) == "replay"
         self.live = Pipeline(cfg.source, self.spec, self.history, self.hub.publish_threadsafe,
                              recorder=self.recorder, site=self.site, calibration=cal,
-                             replay=ground_replay)
+                             replay=True if ground_replay else None)
         self.extra_processors: list[Processor] = []  #: shared by live and replays (stateless)
         self.replays = ReplaySessions(self._session_options, max_sessions=cfg.max_replays,
                                       idle_s=cfg.replay_idle_s, ws_queue_size=cfg.ws_queue_size,

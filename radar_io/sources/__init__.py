@@ -53,4 +53,4 @@ def open_source(url: str) -> ByteSource:
     return factory(url)
 
 
-__all__ = ["ByteSource", "DEFAULT_SOURCE", "SOURCES", "open_source", "scheme_of", "source_kind"]
+__all__ = ["DEFAULT_SOURCE", "SOURCES", "ByteSource", "open_source", "scheme_of", "source_kind"]

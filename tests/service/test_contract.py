@@ -27,6 +27,10 @@ EXCLUDED = {
     "/api/runway/manual": ("positive_data_acceptance",),
     # any bytes are schema-valid; only a decodable image or video is accepted (422 else)
     "/api/runway": ("positive_data_acceptance",),
+    # removed routes: every request answers their declared 410 naming the successor
+    **{path: ("positive_data_acceptance",) for path in (
+        "/api/replay", *(f"/api/replay/{op}" for op in
+                         ("pause", "resume", "seek", "step", "speed", "stop")))},
 }
 
 

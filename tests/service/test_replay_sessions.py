@@ -9,14 +9,14 @@ import time
 import urllib.request
 from pathlib import Path
 
+import independent
 import pytest
 import websockets
 
-import independent
 from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
 from radar_io.wirespec.frame import load_spec
 
-from .liveserver import TOKEN, live_server, service_config
+from .liveserver import TOKEN, browser, live_server, service_config  # noqa: F401 - fixture
 from .test_live_pty import wait_for
 
 GO, GO_SYNC = 0x0005, 0x8005
@@ -54,7 +54,7 @@ async def collect(url: str, until, timeout_s: float = 30.0) -> list[dict]:
         while not until(msgs) and time.monotonic() < deadline:
             try:
                 doc = json.loads(await asyncio.wait_for(ws.recv(), 1.0))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 continue
             except websockets.ConnectionClosed:
                 break
@@ -167,7 +167,7 @@ def test_max_replays_unknown_ids_and_sessions_nobody_watches_end(server):
             while time.monotonic() < end:
                 try:
                     await asyncio.wait_for(ws.recv(), 0.2)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     pass
 
     t0 = time.monotonic()
@@ -189,3 +189,34 @@ def test_the_old_replay_routes_are_gone_and_say_where_to(server, method, path, n
     code, doc = server.request(method, path, {"recording": "x"} if method == "POST" else None,
                                TOKEN)
     assert code == 410 and new in doc["detail"][0]["msg"] and doc["detail"][0]["type"] == "gone"
+
+
+def test_dashboard_replays_in_the_look_back_view_while_live_goes_on(server, browser):
+    """Headless Chromium: "Look back" on a recording, Play opens a session whose
+    /ws/replays/{id} feeds the look-back view while the live view keeps /ws/live; "Live"
+    deletes the session. (The look-back view itself: test_dashboard_lookback.py.)"""
+    write_flight(server.rec_dir / "panel.rdrlog", 20000, seq0=40000, sr=15000)
+    browser.navigate(server.base + "/")
+    browser.wait_for("window.radarReady && radarState.received > 10")
+    browser.eval(f"document.getElementById('token').value = {json.dumps(TOKEN)}, true")
+    browser.wait_for("[...document.getElementById('rec-list').options].some(o => o.value === 'panel')")
+    browser.eval("document.getElementById('rec-list').value = 'panel', "
+                 "document.getElementById('rec-open').click(), true")
+    browser.wait_for("radarLookback.active && radarLookback.loads > 0", 30)
+    browser.eval("document.getElementById('lb-play').click(), true")
+    browser.wait_for("radarReplay.last && radarReplay.last.replay", 20)
+    sid = browser.eval("radarReplay.id")
+    assert [r["id"] for r in server.get("/api/replays")] == [sid]
+    assert browser.eval("radarReplay.last.replay") == sid and browser.eval("radarReplay.last.seq") >= 40000
+    # the live stream was never swapped: the page's live messages are the simulator's
+    n = browser.eval("radarState.received")
+    browser.wait_for(f"radarState.received > {n + 10} && !('replay' in radarState.last)")
+    browser.wait_for(f"document.getElementById('lb-replay').textContent.startsWith('session {sid}:')")
+    browser.eval("document.getElementById('lb-pause').click(), true")
+    wait_for(lambda: server.get(f"/api/replays/{sid}")["paused"], what="paused from the view")
+    browser.eval("document.getElementById('to-live').click(), true")
+    wait_for(lambda: server.get("/api/replays") == [], what="the session deleted")
+    n = browser.eval("radarState.received")
+    browser.wait_for(f"!document.getElementById('live-view').hidden && radarState.received > {n + 10}"
+                     " && !('replay' in radarState.last)", 20)
+    assert server.get("/api/status")["connected"]

@@ -69,7 +69,7 @@ def replay_create(req: ReplayRequest, state: ServiceState = Depends(get_state)) 
 @router.get("/api/replays")
 def replay_list(state: ServiceState = Depends(get_state)) -> list[dict[str, Any]]:
     """The running replay sessions and their state."""
-    return [s.state() for s in state.replays.list()]
+    return [s.state() for s in state.replays.running()]
 
 
 @router.get("/api/replays/{sid}", responses=responses(404, 422))
@@ -115,7 +115,7 @@ def replay_seek(req: SeekRequest, sid: str = SESSION_ID,
 
 @router.post("/api/replays/{sid}/step", tags=["control"], dependencies=CONTROL,
              responses=_CONTROL_ERRORS)
-def replay_step(req: StepRequest = Body(StepRequest()), sid: str = SESSION_ID,
+def replay_step(req: StepRequest = Body(StepRequest(n=1)), sid: str = SESSION_ID,
                 state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Pause and deliver the next ``n`` recorded chunks."""
     s = _session(state, sid)
