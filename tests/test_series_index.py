@@ -12,8 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from radar_io.analysis.series import (FANOUT, SeriesIndex, SeriesOptions, index_dir,
-                                      range_min_max)
+from radar_io.analysis.series import (
+    FANOUT,
+    SeriesIndex,
+    SeriesOptions,
+    index_dir,
+    range_min_max,
+)
 from radar_io.coordinates.reference_path import add_deviation, load_path
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.batch_decoder import decode_bytes
@@ -134,7 +139,7 @@ def test_answers_equal_numpy_min_max_over_the_same_buckets(flight, start_s, end_
 
 def test_ranges_of_every_shape_against_the_pyramid(flight):
     """Random row ranges, from empty to the whole column, through range_min_max directly."""
-    rec, _, options, t, cols = flight
+    rec, _, options, _, cols = flight
     idx = SeriesIndex(rec, options)
     man = idx.update()
     _, levels = idx._open(man, ["h_m", "seq"])
@@ -236,7 +241,7 @@ def test_stale_index_is_rebuilt_and_a_grown_file_extended(flight, tmp_path, spec
 @pytest.mark.parametrize("damage", ["manifest", "truncate", "header", "missing", "level",
                                     "events"])
 def test_damaged_index_is_rebuilt(flight, tmp_path, damage):
-    rec, chunks, options, t, cols = flight
+    rec, _, options, t, cols = flight
     local = tmp_path / rec.name
     local.write_bytes(rec.read_bytes())
     SeriesIndex(local, options).events()
@@ -281,7 +286,8 @@ def test_bad_requests_and_no_room(flight, tmp_path):
     with pytest.raises(StorageError, match="bytes free") as exc:
         SeriesIndex(local, options, reserve_bytes=1 << 62).update()
     assert exc.value.errno is not None
-    assert [p.name for p in tmp_path.iterdir()] == [local.name]  # nothing left behind
+    # nothing left behind but the (empty) lock file
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".flight.series.lock", local.name]
 
 
 def test_empty_recording_and_block_boundaries(spec, tmp_path, monkeypatch):
@@ -291,7 +297,7 @@ def test_empty_recording_and_block_boundaries(spec, tmp_path, monkeypatch):
     answer = SeriesIndex(empty, options).series(["h_m"])
     assert answer["frames"] == 0 and answer["t_s"] == [] and answer["columns"]["h_m"]["min"] == []
     # tiny build blocks: frames and pyramid blocks straddle every boundary
-    import radar_io.analysis.series as series
+    from radar_io.analysis import series
 
     monkeypatch.setattr(series, "BLOCK_BYTES", 1000)
     chunks = simulated_chunks(spec, 3.0, seed=9)
@@ -324,3 +330,22 @@ def test_version_1_recording_uses_its_wall_clock(spec, tmp_path):
     t = np.array(answer["t_s"])
     assert np.all(np.diff(t) >= 0) and t[0] == 0.0  # the backward wall-clock step is held
     assert answer["frames"] == len(decode_bytes(b"".join(d for _, _, d in chunks)))
+
+
+def test_two_processes_building_the_same_index_at_once(flight, tmp_path):
+    """The index is locked across processes (``flock``): both get the right answer, one
+    builds, the other finds it fresh; one directory, no temporary left."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from radar_io.analysis.series import query_series
+
+    rec, _, options, t, cols = flight
+    local = tmp_path / rec.name
+    local.write_bytes(rec.read_bytes())
+    with ProcessPoolExecutor(2) as pool:
+        answers = list(pool.map(query_series, [local] * 2, [options] * 2, [["h_m"]] * 2,
+                                [1.0] * 2, [30.0] * 2, [400] * 2))
+    for a in answers:
+        check(a, expected(t, cols, ["h_m"], 1.0, 30.0, 400), 400)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".flight.series.lock", "flight.rdrlog",
+                                                          "flight.series"]

@@ -28,6 +28,7 @@ bucket from memory-mapped files: never the whole range.
 from __future__ import annotations
 
 import errno
+import fcntl
 import hashlib
 import json
 import logging
@@ -38,10 +39,11 @@ import struct
 import threading
 import time
 import uuid
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -52,6 +54,7 @@ from radar_io.errors import StorageError, ValidationError
 from radar_io.wirespec.frame import FrameSpec
 
 log = logging.getLogger("radar_io.series")
+T = TypeVar("T")
 
 #: index format; another value in a manifest means the index is rebuilt
 FORMAT = "radar_io.series/1"
@@ -115,7 +118,7 @@ def _sha(data: bytes) -> str:
 # -- .npy files that grow ----------------------------------------------------------------
 def _npy_header(dtype: np.dtype[Any], shape: tuple[int, ...]) -> bytes:
     """A version-1.0 NPY header of exactly :data:`HEADER_BYTES` bytes."""
-    text = "{'descr': %r, 'fortran_order': False, 'shape': %r, }" % (dtype.str, shape)
+    text = f"{{'descr': {dtype.str!r}, 'fortran_order': False, 'shape': {shape!r}, }}"
     body = text.ljust(HEADER_BYTES - 10 - 1) + "\n"
     return b"\x93NUMPY\x01\x00" + struct.pack("<H", len(body)) + body.encode("latin1")
 
@@ -125,13 +128,13 @@ class _Growing:
 
     def __init__(self, path: Path, dtype: np.dtype[Any], width: int, rows: int) -> None:
         self.path, self.dtype, self.width, self.rows = path, dtype, width, rows
-        self.f = open(path, "r+b" if path.exists() else "w+b")
+        self.f = open(path, "r+b" if path.exists() else "w+b")  # noqa: SIM115 - kept open
         self.f.seek(HEADER_BYTES + rows * width * dtype.itemsize)
         self.f.truncate()  # whatever an interrupted append left after the committed rows
 
     def append(self, a: np.ndarray) -> None:
         a = np.ascontiguousarray(a, dtype=self.dtype)
-        self.f.write(memoryview(a).cast("B"))
+        self.f.write(a.data)
         self.rows += a.shape[0]
 
     def finish(self) -> None:
@@ -190,7 +193,7 @@ class _Writer:
         self.files: dict[tuple[str, int], _Growing] = {}
         self.carry: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self.row_bytes = sum(dt.itemsize for dt in dtypes.values()) * (FANOUT + 2) / FANOUT
-        self._events = open(directory / "events.jsonl", "a+b")
+        self._events = open(directory / "events.jsonl", "a+b")  # noqa: SIM115 - kept open
         try:
             self._open_files(events)
         except BaseException:
@@ -207,7 +210,7 @@ class _Writer:
         counts = level_rows(rows)
         for name, dt in self.dtypes.items():
             self.files[(name, 0)] = _Growing(directory / f"{name}.npy", dt, 1, rows)
-            carry = []
+            carry: list[tuple[np.ndarray, np.ndarray]] = []
             if name == TIME_COLUMN:
                 self.carry[name] = carry
                 continue
@@ -238,7 +241,7 @@ class _Writer:
                                f"{need} needed (keeping {self.reserve_bytes} for recording)",
                                errno=errno.ENOSPC)
         try:
-            for name, dt in self.dtypes.items():
+            for name in self.dtypes:
                 v = cols[name]
                 self.files[(name, 0)].append(v)
                 if name != TIME_COLUMN:
@@ -258,7 +261,9 @@ class _Writer:
             carry.append((mins[:0], maxs[:0]))
         cm, cx = carry[lvl]
         if cm.size:
-            mins, maxs = np.concatenate([cm, mins]), np.concatenate([cx, maxs])
+            same = mins is maxs  # level 0: one array for both
+            mins = np.concatenate([cm, mins])
+            maxs = mins if same else np.concatenate([cx, maxs])
         k = mins.size // FANOUT
         carry[lvl] = (mins[k * FANOUT:].copy(), maxs[k * FANOUT:].copy())
         if not k:
@@ -386,9 +391,24 @@ _LOCKS: dict[Path, threading.Lock] = {}
 _LOCKS_GUARD = threading.Lock()
 
 
-def _lock_for(path: Path) -> threading.Lock:
+@contextmanager
+def _locked(recording: Path) -> Iterator[None]:
+    """One index user at a time: a lock per recording for the threads of this process and
+    ``flock`` on ``.X.series.lock`` for other processes (worker processes, a CLI)."""
     with _LOCKS_GUARD:
-        return _LOCKS.setdefault(path, threading.Lock())
+        lock = _LOCKS.setdefault(recording, threading.Lock())
+    with lock:
+        try:
+            fd = os.open(recording.parent / f".{index_dir(recording).name}.lock",
+                         os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise StorageError(f"cannot lock the look-back index of {recording}: "
+                               f"{exc.strerror}", errno=exc.errno) from exc
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            yield
+        finally:
+            os.close(fd)  # releases the flock
 
 
 def index_dir(recording: str | os.PathLike[str]) -> Path:
@@ -397,8 +417,8 @@ def index_dir(recording: str | os.PathLike[str]) -> Path:
 
 
 class SeriesIndex:
-    """The look-back index of one recording (built, updated and queried under one lock per
-    recording in this process).
+    """The look-back index of one recording (checked, built, extended and opened under one
+    lock per recording, across threads and processes).
 
     ``reserve_bytes``: free space the index never takes (the live recording's room); a
     build that would need it raises StorageError (ENOSPC) and leaves the old index.
@@ -410,7 +430,6 @@ class SeriesIndex:
         self.dir = index_dir(self.recording)
         self.options = options
         self.reserve_bytes = reserve_bytes
-        self._lock = _lock_for(self.recording)
         self._identity = options.identity()
         self._columns = options.columns
         #: what the last update did: "fresh", "built", "rebuilt", "appended"
@@ -443,36 +462,36 @@ class SeriesIndex:
                 raise ValidationError(f"{what} must be a finite number, got {v}")
         if start_s is not None and end_s is not None and start_s > end_s:
             raise ValidationError(f"start_s {start_s} is after end_s {end_s}")
-        with self._lock:
-            man = self._update(end)
-            try:
-                t, levels = self._open(man, names)
-            except IndexDamaged as exc:
-                log.warning("look-back index of %s damaged (%s): rebuilt", self.recording.name,
-                            exc)
-                man = self._build(self._size(end), "rebuilt")
-                t, levels = self._open(man, names)
+        _, (t, levels) = self._read(end, lambda man: self._open(man, names))
         return _answer(t, levels, start_s, end_s, points)
 
     def events(self, end: int | None = None) -> list[dict[str, Any]]:
         """GO edges (``go_rise``, ``go_fall``) and SYNC 0→1 edges (``sync``) of the recording,
         with the records of its event log ``X.events.jsonl`` (alarms, clock steps,
         annotations: ``kind``, ``t_ns``, ``mono_ns``) put on the same time axis; by time."""
-        with self._lock:
-            man = self._update(end)
-            try:
-                found = self._read_events(man)
-            except IndexDamaged:
-                man = self._build(self._size(end), "rebuilt")
-                found = self._read_events(man)
+        man, found = self._read(end, self._read_events)
         found += _event_log(self.recording.with_suffix(".events.jsonl"), man["recording"])
         found.sort(key=lambda e: (math.inf if e["t_s"] is None else e["t_s"]))
         return found
 
     def update(self, end: int | None = None) -> dict[str, Any]:
         """Build, rebuild or extend the index as needed; the manifest."""
-        with self._lock:
+        with _locked(self.recording):
             return self._update(end)
+
+    def _read(self, end: int | None, read: Callable[[dict[str, Any]], T]
+              ) -> tuple[dict[str, Any], T]:
+        """The manifest of the index brought up to date and ``read(manifest)``, rebuilding
+        the index once when ``read`` finds it damaged; under the lock."""
+        with _locked(self.recording):
+            man = self._update(end)
+            try:
+                return man, read(man)
+            except IndexDamaged as exc:
+                log.warning("look-back index of %s damaged (%s): rebuilt",
+                            self.recording.name, exc)
+                man = self._build(self._size(end), "rebuilt")
+                return man, read(man)
 
     # -- keeping it fresh ------------------------------------------------------------------
     def _size(self, end: int | None) -> int:
@@ -526,21 +545,35 @@ class SeriesIndex:
         return ""
 
     def _dtypes(self) -> dict[str, np.dtype[Any]]:
-        from radar_io.decoding.model import DecodeModel
+        """The dtype each column is stored in: the narrowest that holds every value the
+        decoder can give it exactly (a word's values as float32 when its whole value
+        table is exact in float32, 16-bit words as 16-bit integers), else the decoder's."""
+        from radar_io.decoding.model import DecodeModel, value_table
 
         model = DecodeModel(self.options.spec, site=self.options.site)
-        out = {c: np.dtype(model.dtype(c)) for c in self._columns if c in model.columns}
+        out: dict[str, np.dtype[Any]] = {c: np.dtype(model.dtype(c)) for c in self._columns
+                                         if c in model.columns}
+        for f in model.fields:
+            if f.bits > 16 or f.column not in out:
+                continue
+            if model.is_scaled(f):
+                table = value_table(f)
+                if np.array_equal(table.astype(np.float32).astype(np.float64), table):
+                    out[f.column] = np.dtype("<f4")
+            elif out[f.column].kind in "iu":
+                out[f.column] = np.dtype("<i2" if f.is_signed else "<u2")
         if self.options.path is not None:
             out.update(dy_m=np.dtype("<f8"), dz_m=np.dtype("<f8"), along_m=np.dtype("<f8"),
-                       leg=np.dtype("<i8"))
+                       leg=np.dtype("<i4"))
         out[TIME_COLUMN] = np.dtype("<f8")
         return {c: out[c] for c in [*self._columns, TIME_COLUMN]}
 
     def _build(self, size: int, what: str) -> dict[str, Any]:
         """A new index in a temporary directory, swapped in when complete."""
         parent = self.dir.parent
-        for old in parent.glob(f".{self.dir.name}.*"):  # left by an interrupted build
-            shutil.rmtree(old, ignore_errors=True)
+        for pattern in (f".{self.dir.name}.tmp-*", f".{self.dir.name}.old-*"):
+            for old in parent.glob(pattern):  # left by an interrupted build
+                shutil.rmtree(old, ignore_errors=True)
         tmp = parent / f".{self.dir.name}.tmp-{uuid.uuid4().hex[:8]}"
         try:
             tmp.mkdir()
@@ -548,10 +581,11 @@ class SeriesIndex:
             raise StorageError(f"cannot create look-back index {tmp}: {exc.strerror}",
                                errno=exc.errno) from exc
         try:
-            t = time.perf_counter()
+            t, cpu = time.perf_counter(), time.thread_time()
             state = _State()
             man = self._scan(tmp, state, self._dtypes(), 0, 0, size)
-            man["build_s"] = {**man.pop("scan_s"), "total": time.perf_counter() - t}
+            man["build_s"] = {**man.pop("scan_s"), "total": time.perf_counter() - t,
+                              "cpu": time.thread_time() - cpu}
             self._write_manifest(tmp, man)
             if self.dir.exists():
                 old = parent / f".{self.dir.name}.old-{uuid.uuid4().hex[:8]}"
@@ -649,6 +683,22 @@ class SeriesIndex:
         except (OSError, ValueError) as exc:
             raise IndexDamaged(f"events.jsonl: {exc}") from exc
         return out
+
+
+def query_series(recording: str | os.PathLike[str], options: SeriesOptions,
+                 columns: list[str], start_s: float | None = None, end_s: float | None = None,
+                 points: int = 1000, end: int | None = None,
+                 reserve_bytes: int = 0) -> dict[str, Any]:
+    """:meth:`SeriesIndex.series` as one call of plain, picklable data (for a worker
+    thread or process)."""
+    return SeriesIndex(recording, options, reserve_bytes).series(columns, start_s, end_s,
+                                                                 points, end=end)
+
+
+def query_events(recording: str | os.PathLike[str], options: SeriesOptions,
+                 end: int | None = None, reserve_bytes: int = 0) -> list[dict[str, Any]]:
+    """:meth:`SeriesIndex.events` as one call of plain, picklable data."""
+    return SeriesIndex(recording, options, reserve_bytes).events(end=end)
 
 
 def _head_sha(path: Path, n: int) -> str:

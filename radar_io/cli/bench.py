@@ -23,6 +23,10 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--outputs-hours", type=float, default=0.0, metavar="H",
                    help="also decode an H-hour 1 kHz recording to Parquet and CSV through the "
                    "CLI beside pyarrow anchors (fresh processes, peak RSS); 0 to skip")
+    p.add_argument("--lookback-hours", type=float, default=0.0, metavar="H",
+                   help="also time look-back series queries on an H-hour 1 kHz recording "
+                   "through a real service over HTTP: the first query (index build), then 50 "
+                   "random ranges (p50 / p95 / max), answers checked against numpy; 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
@@ -42,6 +46,11 @@ def run(args: argparse.Namespace) -> int:
 
         result["outputs"] = outputs.run(hours=args.outputs_hours, long_hours=0.0)
         lines.append(outputs.report(result["outputs"]))
+    if args.lookback_hours > 0:
+        from radar_io.benchmarks import lookback
+
+        result["lookback"] = lookback.run(hours=args.lookback_hours)
+        lines.append(lookback.report(result["lookback"]))
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 

@@ -38,22 +38,36 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     """The service app for ``cfg``; refuses a configuration that can never work
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
     from radar_io.service.alarms import attach_alarms, status_loop
-    from radar_io.service.routers import (alarms, calibration, coordinates, live, recordings,
-                                          replay, report, runway, series, status)
+    from radar_io.service.lookback import LookBack
+    from radar_io.service.routers import (
+        alarms,
+        calibration,
+        coordinates,
+        live,
+        recordings,
+        replay,
+        report,
+        runway,
+        series,
+        status,
+    )
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     state = ServiceState(cfg)
     state.alarms = attach_alarms(state)
+    lookback = LookBack(state)  # look-back indexes (routers/series.py)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         state.start(asyncio.get_running_loop())
+        lookback.start()  # after the state: it chains onto the recorder's on_closed
         alarm_task = asyncio.create_task(status_loop(state, state.alarms))
         try:
             yield
         finally:
             alarm_task.cancel()
-            state.stop()
+            state.stop()  # closes the recording: queued for the index, dropped by close()
+            lookback.close()
 
     app = FastAPI(title="radar_io", version=__version__, lifespan=lifespan,
                   docs_url=None, redoc_url=None,  # /docs from vendored files (works offline)
@@ -63,6 +77,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
                   "endpoints need `Authorization: Bearer <token>`. Every error answers "
                   '`{"detail": [{"loc": [...], "msg": "...", "type": "..."}]}`.')
     app.state.service = state
+    app.state.lookback = lookback
     install_error_handlers(app)
     for module in (status, live, recordings, series, replay, calibration, coordinates, alarms,
                    report):

@@ -4,9 +4,9 @@ outputs and the replay sessions.
 Built once by :func:`radar_io.service.app.build_app` (everything that can be refused
 is refused here, before the server binds), started and stopped by the app's lifespan
 (:meth:`ServiceState.start`, :meth:`ServiceState.stop`): the live reader thread, the sink
-workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver, the look-back
-indexer, the CAN air-data reader and the replay sessions. Nothing opens a file, a device or
-a connection before ``start``.
+workers (TLM1, D/A, ASTERIX), the MQTT publisher, the recording archiver, the CAN
+air-data reader and the replay sessions. Nothing opens a file, a device or a connection
+before ``start``.
 
 The live pipeline's source is fixed for the life of the service: no route changes it,
 and only ``POST /api/recordings/start|stop`` changes the recorder. Replays run as
@@ -93,9 +93,6 @@ class ServiceState:
                                       idle_s=cfg.replay_idle_s, ws_queue_size=cfg.ws_queue_size,
                                       ws_max_clients=cfg.ws_max_clients,
                                       ws_batch_interval_s=cfg.ws_batch_interval_s)
-        from radar_io.service.lookback import LookBack
-
-        self.lookback = LookBack(self)  # look-back indexes (routers/series.py)
         self.sinks: dict[str, Any] = {}       # name → SinkWorker (started in start())
         self._sink_defs: dict[str, Any] = {}  # name → Sink, checked now, opened by its worker
         self.air: Any = None
@@ -164,8 +161,7 @@ class ServiceState:
             from radar_io.service.archiver import RecordingArchiver
 
             self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options)
-        self.lookback.start()
-        self.recorder.on_closed = self._recording_closed
+            self.recorder.on_closed = self.archiver.submit
         self.replays.start(loop)
         self.live.start()
 
@@ -173,13 +169,6 @@ class ServiceState:
     def acq(self) -> Pipeline:
         """The live pipeline (its former name)."""
         return self.live
-
-    def _recording_closed(self, path: Path) -> None:
-        """A recording closed cleanly: archive it (when configured) and index it for
-        look-back; both queue the work for their own thread."""
-        if self.archiver is not None:
-            self.archiver.submit(path)
-        self.lookback.submit(path)
 
     def _archive_options(self) -> dict[str, Any]:
         """What a closed recording is archived with: the live site, spec, calibration, path."""
@@ -194,10 +183,10 @@ class ServiceState:
 
     def stop(self) -> None:
         """Stop the replay sessions and the live reader, close the recording, finish
-        archiving and look-back indexing, cancel runway jobs, stop the sinks, the MQTT
-        publisher and the air-data reader — each even if one fails."""
+        archiving, cancel runway jobs, stop the sinks, the MQTT publisher and the air-data
+        reader — each even if one fails."""
         steps = [("replay sessions", self.replays.close), ("reader", self.live.stop),
-                 ("recorder", self.recorder.close), ("look-back index", self.lookback.close)]
+                 ("recorder", self.recorder.close)]
         if self.archiver is not None:  # finishes the recording just closed
             steps.append(("archiver", self.archiver.close))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files

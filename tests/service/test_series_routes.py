@@ -12,15 +12,21 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
+from test_series_index import (
+    PATH_FILE,
+    check,
+    expected,
+    reference,
+    simulated_chunks,
+    write_recording,
+)
 
 from radar_io.analysis.series import SeriesOptions, index_dir
 from radar_io.coordinates.reference_path import load_path
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.biases import Calibration
-from test_series_index import PATH_FILE, check, expected, reference, simulated_chunks, \
-    write_recording
 
-from .liveserver import TOKEN, live_server, service_config
+from .liveserver import TOKEN, LiveServer, live_server, service_config
 
 
 def get(base: str, path: str) -> tuple[int, dict]:
@@ -52,6 +58,12 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
         status, body = get(srv.base, "/api/recordings/flight/series?columns=h_m&start_s=4&end_s=4.1")
         assert body["decimated"] is False and body["frames"] == len(body["t_s"]) > 50
 
+        with open(index_dir(recs / "flight.rdrlog") / "h_m.1.npy", "r+b") as f:
+            f.truncate(100)  # a damaged index file: rebuilt, answered as before
+        status, again = get(srv.base, "/api/recordings/flight/series?columns=h_m&points=77")
+        assert status == 200
+        check(again, expected(t, cols, ["h_m"], None, None, 77), 77)
+
         status, body = get(srv.base, "/api/recordings/flight/events")
         assert status == 200
         kinds = [e["kind"] for e in body["events"]]
@@ -75,11 +87,20 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
 
 def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_path):
     cfg = service_config(tmp_path / "svc", auto_record="manual")
-    with live_server(cfg) as srv:
+    srv = LiveServer(cfg)
+    srv.app.state.lookback.refresh_s = 0.2
+    try:
+        srv.start()
         srv.wait_connected()
         status, body = srv.request("POST", "/api/recordings/start", token=TOKEN)
         assert status == 200
         rec = body["recording"]
+        path = Path(cfg.data_dir) / "recordings" / f"{rec}.rdrlog"
+        man = index_dir(path) / "manifest.json"
+        deadline = time.monotonic() + 30
+        while not (man.exists() and json.loads(man.read_text())["rows"] > 500):
+            assert time.monotonic() < deadline, "the open recording was not indexed"
+            time.sleep(0.1)  # no query yet: the service's worker keeps the index current
         frames = []
         for _ in range(3):
             time.sleep(1.0)
@@ -87,10 +108,8 @@ def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_pat
             assert status == 200, body
             frames.append(body["frames"])
             assert body["decimated"] is (body["frames"] > 50)
-        assert 0 < frames[0] < frames[1] < frames[2]
-        path = Path(cfg.data_dir) / "recordings" / f"{rec}.rdrlog"
+        assert 500 < frames[0] < frames[1] < frames[2]
         assert srv.request("POST", "/api/recordings/stop", token=TOKEN)[0] == 200
-        man = index_dir(path) / "manifest.json"
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:  # the service's worker indexes the closed file
             if man.exists() and json.loads(man.read_text())["recording"]["scanned_bytes"] \
@@ -102,3 +121,5 @@ def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_pat
         status, body = get(srv.base, f"/api/recordings/{rec}/series?columns=h_m&points=50")
         assert body["frames"] > frames[2]
         assert np.all(np.diff(body["t_s"]) > 0)
+    finally:
+        srv.stop()

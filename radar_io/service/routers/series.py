@@ -5,20 +5,25 @@ column and the recording's events, from the recording's look-back index
 from __future__ import annotations
 
 import json
+import time
 from typing import Any
 
 from fastapi import APIRouter, Depends, Path, Query
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
+from starlette.requests import HTTPConnection
 
+from radar_io.analysis.series import query_events, query_series
 from radar_io.service.errors import responses
-from radar_io.service.routers.deps import get_state
-from radar_io.service.state import ID_PATTERN, ServiceState
+from radar_io.service.lookback import LookBack
+from radar_io.service.state import ID_PATTERN
 
 router = APIRouter(tags=["recordings"])
 
 #: dependencies of the expensive look-back requests: the per-kind limiter (kind "series",
-#: 429 + Retry-After) is attached here, for both routes
+#: 429 + Retry-After) is attached here, for both routes. Each route's work is one call of
+#: plain, picklable data (``query_series`` / ``query_events``), so it can as well be handed
+#: to a limiter's worker pool or process as it is.
 EXPENSIVE: list[Any] = []
 _ERRORS = responses(404, 422, 429, 507)
 COLUMNS_PATTERN = r"^[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*$"
@@ -50,9 +55,18 @@ class EventsAnswer(BaseModel):
     events: list[Event]
 
 
-def _json(doc: dict[str, Any]) -> Response:
-    return Response(json.dumps(doc, separators=(",", ":"), allow_nan=False),
-                    media_type="application/json")
+def get_lookback(conn: HTTPConnection) -> LookBack:
+    """The look-back indexes of the app serving this request."""
+    return conn.app.state.lookback  # type: ignore[no-any-return]
+
+
+def _json(doc: dict[str, Any], t0: float, cpu0: float) -> Response:
+    """The JSON answer, with its cost in a ``Server-Timing`` header: ``total`` (wall ms,
+    index update included) and ``cpu`` (this worker thread's CPU ms)."""
+    body = json.dumps(doc, separators=(",", ":"), allow_nan=False)
+    timing = (f"total;dur={(time.perf_counter() - t0) * 1e3:.2f}, "
+              f"cpu;dur={(time.thread_time() - cpu0) * 1e3:.2f}")
+    return Response(body, media_type="application/json", headers={"Server-Timing": timing})
 
 
 @router.get("/api/recordings/{rec_id}/series", dependencies=EXPENSIVE, response_model=None,
@@ -65,7 +79,7 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
            end_s: float | None = Query(None, ge=0.0, allow_inf_nan=False,
                                        description="range end, s (default: the last frame)"),
            points: int = Query(1000, ge=1, le=10000, description="buckets"),
-           state: ServiceState = Depends(get_state)) -> Response:
+           lookback: LookBack = Depends(get_lookback)) -> Response:
     """Min / max of columns over a time range of a recording (closed, or still being written:
     up to its last whole chunk). Time: seconds since the recording's first chunk on the
     monotonic receive time; each frame has the time of the chunk that completed it. More
@@ -73,16 +87,18 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     [start, next start), the last one closed), `t_s` their starts, min / max over the
     non-null samples of each (null: no value). Otherwise every frame (min = max). The
     first query of a recording builds its index (docs/lookback.md)."""
-    idx, end = state.lookback.index(rec_id)
-    return _json(idx.series(columns.split(","), start_s, end_s, points, end=end))
+    t0, cpu0 = time.perf_counter(), time.thread_time()
+    doc = query_series(columns=columns.split(","), start_s=start_s, end_s=end_s, points=points,
+                       **lookback.request(rec_id))
+    return _json(doc, t0, cpu0)
 
 
 @router.get("/api/recordings/{rec_id}/events", dependencies=EXPENSIVE, response_model=None,
             responses={200: {"model": EventsAnswer}, **_ERRORS})
 def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
-           state: ServiceState = Depends(get_state)) -> Response:
+           lookback: LookBack = Depends(get_lookback)) -> Response:
     """GO edges (`go_rise`, `go_fall`) and SYNC 0→1 edges (`sync`, with `seq`, `tod_s`) of a
     recording, and the records of its event log (alarms, clock steps, annotations), by
     time on the series' axis."""
-    idx, end = state.lookback.index(rec_id)
-    return _json({"events": idx.events(end=end)})
+    t0, cpu0 = time.perf_counter(), time.thread_time()
+    return _json({"events": query_events(**lookback.request(rec_id))}, t0, cpu0)
