@@ -188,7 +188,7 @@ async function load() {
  * of the chunk that completed them, so a view zoomed to a few chunks has many empty buckets:
  * lines and the track go straight across them, and break only at null values of frames that
  * exist (NG rows of the coordinate columns). */
-export function withoutEmptyBuckets(doc) {
+function withoutEmptyBuckets(doc) {
   const p = doc.columns[PRESENT];
   if (!p || !doc.decimated) return doc;
   const keep = [];
