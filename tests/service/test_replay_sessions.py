@@ -191,7 +191,7 @@ def test_the_old_replay_routes_are_gone_and_say_where_to(server, method, path, n
     assert code == 410 and new in doc["detail"][0]["msg"] and doc["detail"][0]["type"] == "gone"
 
 
-def test_dashboard_replays_in_the_look_back_view_while_live_goes_on(server, browser):
+def test_dashboard_replays_in_the_look_back_view_while_live_goes_on(server, browser):  # noqa: F811
     """Headless Chromium: "Look back" on a recording, Play opens a session whose
     /ws/replays/{id} feeds the look-back view while the live view keeps /ws/live; "Live"
     deletes the session. (The look-back view itself: test_dashboard_lookback.py.)"""

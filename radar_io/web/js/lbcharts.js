@@ -1,14 +1,16 @@
 // Look-back strip charts (uPlot): one chart per column over the chosen time range, the
 // min / max band of each bucket from GET /api/recordings/{id}/series, GO (rise solid, fall
-// dashed) / SYNC / alarm / clock-step markers, drag to zoom, double-click for the whole recording, a cursor line
-// shared by every chart. X axis: seconds since the recording's first chunk.
+// dashed) / SYNC / alarm / clock-step markers, drag to zoom, double-click for the whole
+// recording, a cursor line shared by every chart. X axis: seconds since the recording's
+// first chunk.
 import uPlot from "../vendor/uPlot.esm.js";
+import { AXIS, COLORS, chartBox } from "./stripchart.js";
 
 export const CHART_W = 700;       // CSS px of a chart
 const CHART_H = 150, Y_AXIS = 64, PAD = [10, 24, 0, 0];
 /** CSS px of a chart's plot area (the padding and the y axis are fixed for that). */
 export const PLOT_W = CHART_W - Y_AXIS - PAD[1] - PAD[3];
-const COLORS = ["#3b82f6", "#d29922", "#2ea043", "#f778ba", "#a371f7", "#da3633"];
+
 /** Marker colour of an event kind: go_rise / go_fall green, sync amber, alarm… red, clock… pink. */
 export function eventColor(kind) {
   if (kind.startsWith("go")) return "#2ea043";
@@ -49,26 +51,13 @@ export function lowerBound(arr, v, key = (x) => x) {
 export class ColumnChart {
   constructor(column, index, parent, view, events, on) {
     this.column = column;
-    this.drawnAt = 0;
     this.waiters = [];
     const color = COLORS[index % COLORS.length];
-    const axis = { stroke: "#7a8494", grid: { stroke: "#30363d", width: 1 }, ticks: { stroke: "#30363d" } };
-    const box = document.createElement("div");
-    box.className = "strip";
-    box.dataset.column = column;
-    const head = document.createElement("div");
-    head.className = "strip-head";
-    const name = document.createElement("span");
-    name.textContent = column;
     this.value = document.createElement("span");  // the value at the cursor
     this.value.className = "strip-value";
-    this.close = document.createElement("button");
-    this.close.textContent = "×"; this.close.title = `remove ${column}`;
-    head.append(name, this.value, this.close);
-    const plot = document.createElement("div");
-    box.append(head, plot);
-    parent.appendChild(box);
+    const { box, plot, close } = chartBox(parent, column, this.value);
     this.box = box;
+    this.close = close;
     const markers = (u) => this.drawMarkers(u, events());
     this.u = new uPlot({
       width: CHART_W, height: CHART_H, legend: { show: false }, padding: PAD,
@@ -76,11 +65,11 @@ export class ColumnChart {
       series: [{}, { label: `${column} min`, stroke: color, width: 1, spanGaps: false },
         { label: `${column} max`, stroke: color, width: 1, spanGaps: false }],
       bands: [{ series: [2, 1], fill: color + "55" }],
-      axes: [{ ...axis, space: 90, values: (u, ticks, _a, _s, incr) => { const v = view(); return ticks.map((t) => fmtT(t, v[1] - v[0], decimalsFor(incr))); } },
-        { ...axis, size: Y_AXIS }],
+      axes: [{ ...AXIS, space: 90, values: (u, ticks, _a, _s, incr) => { const v = view(); return ticks.map((t) => fmtT(t, v[1] - v[0], decimalsFor(incr))); } },
+        { ...AXIS, size: Y_AXIS }],
       cursor: { x: false, y: false, sync: { key: "lookback" }, drag: { x: true, y: false, setScale: false }, points: { show: false } },
       hooks: {
-        draw: [markers, () => { this.drawnAt = performance.now(); this.waiters.splice(0).forEach((f) => f()); }],
+        draw: [markers, () => this.waiters.splice(0).forEach((f) => f())],
         setSelect: [(u) => {
           if (u.select.width < 3) return;
           const a = u.posToVal(u.select.left, "x"), b = u.posToVal(u.select.left + u.select.width, "x");
