@@ -168,6 +168,7 @@ def test_events_are_the_live_edges_and_the_event_log(flight, tmp_path):
     log_lines = [{"kind": "annotation", "t_ns": T0_NS, "mono_ns": mono0 + 2_500_000_000,
                   "text": "gear down"},
                  {"type": "alarm", "action": "raise", "id": "x", "t_s": (wall0 + 3e9) / 1e9},
+                 {"kind": "sync", "t_ns": T0_NS, "mono_ns": mono0, "seq": 1},  # from the frames
                  "not an object", {"kind": "no time"}]
     local.with_suffix(".events.jsonl").write_text(
         "\n".join(json.dumps(r) for r in log_lines) + "\n{broken\n")
@@ -176,16 +177,17 @@ def test_events_are_the_live_edges_and_the_event_log(flight, tmp_path):
     want = []
     for i in range(len(t)):  # the reader thread's rule, frame by frame
         if go[i] != (go[i - 1] if i else 0):
-            want.append(("go_rise" if go[i] else "go_fall", t[i], cols["seq"][i]))
+            want.append(("go", "rise" if go[i] else "fall", t[i], cols["seq"][i]))
         if sync[i] and not (sync[i - 1] if i else 0):
-            want.append(("sync", t[i], cols["seq"][i]))
-    got = [(e["kind"], e["t_s"], e["seq"]) for e in ev if e["kind"] in ("go_rise", "go_fall", "sync")]
+            want.append(("sync", None, t[i], cols["seq"][i]))
+    got = [(e["kind"], e.get("edge"), e["t_s"], e["seq"]) for e in ev
+           if e["kind"] in ("go", "sync")]
     assert got == want and len(want) > 40
     note = next(e for e in ev if e["kind"] == "annotation")
     assert note["t_s"] == 2.5 and note["text"] == "gear down"
     alarm = next(e for e in ev if e["kind"] == "alarm")
     assert alarm["t_s"] == pytest.approx(3.0, abs=1e-6)  # no mono_ns: mapped by the wall clock
-    assert len([e for e in ev if e["kind"] not in ("go_rise", "go_fall", "sync")]) == 2
+    assert len([e for e in ev if e["kind"] not in ("go", "sync")]) == 2
     assert [e["t_s"] for e in ev] == sorted(e["t_s"] for e in ev)
 
 

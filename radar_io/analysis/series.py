@@ -13,7 +13,8 @@ docs/lookback.md):
   holds the min and max of rows [16 j, 16 j + 16) of level K - 1 (level 0 is the column
   itself), NaN (no value) skipped; only whole blocks are stored, so ``rows_K = rows_{K-1} //
   16`` and a level exists while it has a row;
-* ``events.jsonl``: GO edges and SYNC 0→1 edges found while indexing;
+* ``events.jsonl``: GO edges (``go``, ``edge`` rise / fall) and SYNC 0→1 edges
+  (``sync``) found while indexing;
 * ``manifest.json``: format, row count, column dtypes, the identity of what decoded it
   (spec, calibration, site, path), how far the recording was read and the state to go on
   from there (the framer's partial frame, the last GO / SYNC values).
@@ -57,7 +58,7 @@ log = logging.getLogger("radar_io.series")
 T = TypeVar("T")
 
 #: index format; another value in a manifest means the index is rebuilt
-FORMAT = "radar_io.series/1"
+FORMAT = "radar_io.series/2"
 #: rows of one pyramid level per row of the next
 FANOUT = 16
 #: the index directory of ``X.rdrlog`` is ``X.series``
@@ -69,6 +70,8 @@ BLOCK_BYTES = 1 << 21
 HEADER_BYTES = 128
 #: recording bytes hashed to recognise the same recording again
 HEAD_BYTES = 4096
+#: event kinds found in the frames themselves (an event log's records of these are not used)
+FRAME_EVENTS = ("go", "sync")
 
 
 class IndexDamaged(Exception):
@@ -378,12 +381,17 @@ class _Scanner:
         prev_go = np.concatenate([[st.go], go[:-1]])
         prev_sync = np.concatenate([[st.sync], sync[:-1]])
         st.go, st.sync = int(go[-1]), int(sync[-1])
-        found = [(int(i), 0, "go_rise" if go[i] else "go_fall")
-                 for i in np.flatnonzero(go != prev_go)]
-        found += [(int(i), 1, "sync") for i in np.flatnonzero((sync != 0) & (prev_sync == 0))]
         seq, tod = cols["seq"], cols["tod_s"]
-        return [{"kind": kind, "t_s": float(t_s[i]), "t_ns": int(t_ns[i]), "seq": int(seq[i]),
-                 "tod_s": float(tod[i])} for i, _, kind in sorted(found)]
+
+        def event(i: int, kind: str, **extra: str) -> dict[str, Any]:
+            return {"kind": kind, **extra, "t_s": float(t_s[i]), "t_ns": int(t_ns[i]),
+                    "seq": int(seq[i]), "tod_s": float(tod[i])}
+
+        found = [(int(i), 0, event(i, "go", edge="rise" if go[i] else "fall"))
+                 for i in np.flatnonzero(go != prev_go)]
+        found += [(int(i), 1, event(i, "sync"))
+                  for i in np.flatnonzero((sync != 0) & (prev_sync == 0))]
+        return [e for _, _, e in sorted(found, key=lambda f: f[:2])]
 
 
 # -- the index -----------------------------------------------------------------------------
@@ -466,9 +474,11 @@ class SeriesIndex:
         return _answer(t, levels, start_s, end_s, points)
 
     def events(self, end: int | None = None) -> list[dict[str, Any]]:
-        """GO edges (``go_rise``, ``go_fall``) and SYNC 0→1 edges (``sync``) of the recording,
-        with the records of its event log ``X.events.jsonl`` (alarms, clock steps,
-        annotations: ``kind``, ``t_ns``, ``mono_ns``) put on the same time axis; by time."""
+        """GO edges (``go``, ``edge`` rise / fall) and SYNC 0→1 edges (``sync``) of the
+        recording, found in its frames, with the other records of its event log
+        ``X.events.jsonl`` (alarms, clock steps, annotations: ``kind``, ``t_ns``,
+        ``mono_ns``) put on the same time axis; by time. The log's own ``go`` / ``sync``
+        records are left out: the frames give them for any recording."""
         man, found = self._read(end, self._read_events)
         found += _event_log(self.recording.with_suffix(".events.jsonl"), man["recording"])
         found.sort(key=lambda e: (math.inf if e["t_s"] is None else e["t_s"]))
@@ -734,6 +744,8 @@ def _event_log(path: Path, rec: dict[str, Any]) -> list[dict[str, Any]]:
             t_ns = round(r["t_s"] * 1e9)  # the alarm log's Unix seconds
         if not isinstance(kind, str) or not isinstance(t_ns, int):
             bad += 1
+            continue
+        if kind in FRAME_EVENTS:
             continue
         if isinstance(mono, int) and t0_mono is not None:
             t_s: float | None = (mono - t0_mono) / 1e9

@@ -33,7 +33,6 @@ class LookBack:
 
     def __init__(self, state: ServiceState) -> None:
         self.state = state
-        self.built = 0
         self.errors = 0
         self.last_error: str | None = None
         self._q: queue.Queue[Path | None] = queue.Queue()
@@ -88,26 +87,19 @@ class LookBack:
                 continue
             if path is None:
                 return
-            if self._update(path, None):
-                self.built += 1
+            self._update(path, None)
 
-    def _update(self, path: Path, end: int | None) -> bool:
+    def _update(self, path: Path, end: int | None) -> None:
         """Bring one index up to date; failures are counted and logged (once per message)."""
         try:
             SeriesIndex(path, self.options(),
                         reserve_bytes=self.state.recorder.low_space_bytes).update(end)
-            return True
         except Exception as exc:  # noqa: BLE001 - a failed index never stops the next
             self.errors += 1
             msg = f"{path.name}: {exc}"
             if msg != self.last_error:
                 log.warning("look-back index of %s", msg)
             self.last_error = msg
-            return False
-
-    def stats(self) -> dict[str, Any]:
-        return {"built": self.built, "errors": self.errors, "pending": self._q.qsize(),
-                "last_error": self.last_error}
 
     def close(self, timeout_s: float = 1.0) -> None:
         """Stop the worker: the queued recordings are dropped (indexed on their first query)

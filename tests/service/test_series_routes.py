@@ -67,7 +67,8 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
         status, body = get(srv.base, "/api/recordings/flight/events")
         assert status == 200
         kinds = [e["kind"] for e in body["events"]]
-        assert kinds.count("go_rise") == 1 and kinds.count("sync") >= 30
+        assert kinds.count("go") == 1 and kinds.count("sync") >= 30
+        assert body["events"][kinds.index("go")]["edge"] == "rise"
         assert all(set(e) >= {"kind", "t_s", "t_ns", "seq", "tod_s"} for e in body["events"])
 
         for path, code, words in [
@@ -86,7 +87,8 @@ def test_series_and_events_of_a_recording(tmp_path, spec):
 
 
 def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_path):
-    cfg = service_config(tmp_path / "svc", auto_record="manual")
+    cfg = service_config(tmp_path / "svc", source="sim://?sync_every_s=0.5",
+                         auto_record="manual")
     srv = LiveServer(cfg)
     srv.app.state.lookback.refresh_s = 0.2
     try:
@@ -121,5 +123,10 @@ def test_the_recording_being_written_grows_and_is_indexed_when_it_closes(tmp_pat
         status, body = get(srv.base, f"/api/recordings/{rec}/series?columns=h_m&points=50")
         assert body["frames"] > frames[2]
         assert np.all(np.diff(body["t_s"]) > 0)
+        status, body = get(srv.base, f"/api/recordings/{rec}/events")
+        marks = [(e["kind"], e.get("seq"), e["t_s"]) for e in body["events"]
+                 if e["kind"] in ("go", "sync")]
+        assert status == 200 and len(marks) == len(set(marks))  # each edge once
+        assert sum(kind == "sync" for kind, _, _ in marks) >= 5
     finally:
         srv.stop()

@@ -46,7 +46,8 @@ class SeriesAnswer(BaseModel):
 class Event(BaseModel):
     model_config = ConfigDict(extra="allow")
 
-    kind: str = Field(description="go_rise, go_fall, sync, or the event log's kind (alarm …)")
+    kind: str = Field(description="go (with edge: rise / fall), sync, or the event log's kind "
+                      "(alarm, clock_step, …)")
     t_s: float | None = Field(description="s since the first chunk (monotonic receive time)")
     t_ns: int = Field(description="wall-clock receive time, ns since the Unix epoch (a label)")
 
@@ -97,8 +98,8 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
             responses={200: {"model": EventsAnswer}, **_ERRORS})
 def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
            lookback: LookBack = Depends(get_lookback)) -> Response:
-    """GO edges (`go_rise`, `go_fall`) and SYNC 0→1 edges (`sync`, with `seq`, `tod_s`) of a
-    recording, and the records of its event log (alarms, clock steps, annotations), by
-    time on the series' axis."""
+    """GO edges (`go`, `edge` rise / fall) and SYNC 0→1 edges (`sync`), each with `seq` and
+    `tod_s`, found in the recording's frames, and the other records of its event log
+    (alarms, clock steps, annotations), by time on the series' axis."""
     t0, cpu0 = time.perf_counter(), time.thread_time()
     return _json({"events": query_events(**lookback.request(rec_id))}, t0, cpu0)
