@@ -11,7 +11,8 @@ const CHART_H = 150, Y_AXIS = 64, PAD = [10, 24, 0, 0];
 /** CSS px of a chart's plot area (the padding and the y axis are fixed for that). */
 export const PLOT_W = CHART_W - Y_AXIS - PAD[1] - PAD[3];
 
-/** Marker colour of an event kind: go_rise / go_fall green, sync amber, alarm… red, clock… pink. */
+/** Marker colour of an event kind: go (edge rise / fall) green, sync amber, alarm… red,
+ * clock… pink, others grey. */
 export function eventColor(kind) {
   if (kind.startsWith("go")) return "#2ea043";
   if (kind === "sync") return "#d29922";
@@ -110,7 +111,8 @@ export class ColumnChart {
       ctx.strokeStyle = eventColor(e.kind);
       ctx.globalAlpha = e.kind === "sync" ? 0.55 : 0.95;
       ctx.lineWidth = (e.kind === "sync" ? 1 : 2) * devicePixelRatio;
-      ctx.setLineDash(e.kind === "go_fall" ? [4 * devicePixelRatio, 3 * devicePixelRatio] : []);
+      const fall = e.kind === "go" && e.edge === "fall";
+      ctx.setLineDash(fall ? [4 * devicePixelRatio, 3 * devicePixelRatio] : []);
       ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, bottom); ctx.stroke();
     }
     ctx.restore();
