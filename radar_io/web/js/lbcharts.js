@@ -6,7 +6,7 @@
 import uPlot from "../vendor/uPlot.esm.js";
 import { AXIS, COLORS, chartBox } from "./stripchart.js";
 
-export const CHART_W = 700;       // CSS px of a chart
+const CHART_W = 700;       // CSS px of a chart
 const CHART_H = 150, Y_AXIS = 64, PAD = [10, 24, 0, 0];
 /** CSS px of a chart's plot area (the padding and the y axis are fixed for that). */
 export const PLOT_W = CHART_W - Y_AXIS - PAD[1] - PAD[3];

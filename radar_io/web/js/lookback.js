@@ -12,7 +12,7 @@ import { fillRecordings } from "./recordings.js";
 import { ColumnChart, PLOT_W, decimalsFor, fmtT, lowerBound } from "./lbcharts.js";
 import * as replay from "./replays.js";
 
-export const DEFAULT_COLUMNS = ["sr_m", "el_deg", "h_m"];
+const DEFAULT_COLUMNS = ["sr_m", "el_deg", "h_m"];
 const TRACK = ["x_m", "y_m", "h_m"];   // the plan and profile views
 const MAX_SYNC_MARKS = 100;            // more SYNC edges in the range: not marked on the plan
 const PRESENT = "seq";                 // never null in a frame: null only in an empty bucket
