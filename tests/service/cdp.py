@@ -88,6 +88,25 @@ class Chrome:
             time.sleep(0.1)
         raise AssertionError(f"timed out in the browser waiting for: {expr}")
 
+    def mouse(self, kind: str, x: float, y: float, **kw: Any) -> None:
+        """One mouse event at CSS pixel (x, y): mouseMoved, mousePressed, mouseReleased."""
+        self.call("Input.dispatchMouseEvent", type=kind, x=x, y=y, **kw)
+
+    def drag(self, x0: float, y0: float, x1: float, y1: float, steps: int = 5) -> None:
+        """Press the left button at (x0, y0), move to (x1, y1) and release it."""
+        self.mouse("mouseMoved", x0, y0)
+        self.mouse("mousePressed", x0, y0, button="left", clickCount=1)
+        for k in range(1, steps + 1):
+            self.mouse("mouseMoved", x0 + (x1 - x0) * k / steps, y0 + (y1 - y0) * k / steps,
+                       button="left", buttons=1)
+        self.mouse("mouseReleased", x1, y1, button="left", clickCount=1)
+
+    def double_click(self, x: float, y: float) -> None:
+        self.mouse("mouseMoved", x, y)
+        for n in (1, 2):
+            self.mouse("mousePressed", x, y, button="left", clickCount=n)
+            self.mouse("mouseReleased", x, y, button="left", clickCount=n)
+
     def screenshot(self, path: Path) -> None:
         data = self.call("Page.captureScreenshot", format="png")["data"]
         path.parent.mkdir(parents=True, exist_ok=True)

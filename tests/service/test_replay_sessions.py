@@ -191,26 +191,32 @@ def test_the_old_replay_routes_are_gone_and_say_where_to(server, method, path, n
     assert code == 410 and new in doc["detail"][0]["msg"] and doc["detail"][0]["type"] == "gone"
 
 
-def test_dashboard_replay_panel_uses_a_session_and_returns_to_live(server, browser):
-    """Headless Chromium: Replay opens a session and the views follow /ws/replays/{id};
-    "Back to live" deletes it and the views follow /ws/live again."""
+def test_dashboard_replays_in_the_look_back_view_while_live_goes_on(server, browser):  # noqa: F811
+    """Headless Chromium: "Look back" on a recording, Play opens a session whose
+    /ws/replays/{id} feeds the look-back view while the live view keeps /ws/live; "Live"
+    deletes the session. (The look-back view itself: test_dashboard_lookback.py.)"""
     write_flight(server.rec_dir / "panel.rdrlog", 20000, seq0=40000, sr=15000)
     browser.navigate(server.base + "/")
     browser.wait_for("window.radarReady && radarState.received > 10")
     browser.eval(f"document.getElementById('token').value = {json.dumps(TOKEN)}, true")
     browser.wait_for("[...document.getElementById('rec-list').options].some(o => o.value === 'panel')")
-    browser.eval("document.getElementById('rec-list').value = 'panel', true")
-    browser.eval("document.getElementById('replay').click(), true")
-    browser.wait_for("radarState.replay !== null && radarState.last && radarState.last.replay", 20)
-    sid = browser.eval("radarState.replay.id")
+    browser.eval("document.getElementById('rec-list').value = 'panel', "
+                 "document.getElementById('rec-open').click(), true")
+    browser.wait_for("radarLookback.active && radarLookback.loads > 0", 30)
+    browser.eval("document.getElementById('lb-play').click(), true")
+    browser.wait_for("radarReplay.last && radarReplay.last.replay", 20)
+    sid = browser.eval("radarReplay.id")
     assert [r["id"] for r in server.get("/api/replays")] == [sid]
-    assert browser.eval("radarState.last.replay") == sid and browser.eval("radarState.last.seq") >= 40000
-    browser.wait_for("document.getElementById('mode').textContent === 'REPLAY'")
-    browser.wait_for("document.getElementById('replay-state').textContent.startsWith('panel:')")
-    browser.eval("document.getElementById('pause').click(), true")
-    wait_for(lambda: server.get(f"/api/replays/{sid}")["paused"], what="paused from the panel")
-    browser.eval("document.getElementById('live').click(), true")
+    assert browser.eval("radarReplay.last.replay") == sid and browser.eval("radarReplay.last.seq") >= 40000
+    # the live stream was never swapped: the page's live messages are the simulator's
+    n = browser.eval("radarState.received")
+    browser.wait_for(f"radarState.received > {n + 10} && !('replay' in radarState.last)")
+    browser.wait_for(f"document.getElementById('lb-replay').textContent.startsWith('session {sid}:')")
+    browser.eval("document.getElementById('lb-pause').click(), true")
+    wait_for(lambda: server.get(f"/api/replays/{sid}")["paused"], what="paused from the view")
+    browser.eval("document.getElementById('to-live').click(), true")
     wait_for(lambda: server.get("/api/replays") == [], what="the session deleted")
-    browser.wait_for("radarState.replay === null && radarState.last && !('replay' in radarState.last)"
-                     " && radarState.last.seq < 40000", 20)
+    n = browser.eval("radarState.received")
+    browser.wait_for(f"!document.getElementById('live-view').hidden && radarState.received > {n + 10}"
+                     " && !('replay' in radarState.last)", 20)
     assert server.get("/api/status")["connected"]

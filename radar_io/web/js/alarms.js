@@ -48,6 +48,9 @@ export function setAlarms(list) {
   const quiet = $("alarms-acked");
   quiet.textContent = acked.length ? `acknowledged: ${acked.map((a) => a.name || a.id).join(", ")}` : "";
   quiet.hidden = acked.length === 0;
+  const count = $("ls-alarms"); // the live strip
+  count.textContent = `${open.length} alarm${open.length === 1 ? "" : "s"}`;
+  count.className = "tag " + (open.length ? "bad" : "off");
 }
 
 export async function acknowledge(id) {

@@ -23,8 +23,8 @@ export class ApiError extends Error {
 }
 
 /** fetch + JSON; throws ApiError (with the formatted message) when the status is not 2xx. */
-export async function request(path, { method = "GET", body, headers = {}, raw = false } = {}) {
-  const init = { method, headers: { ...headers }, cache: "no-store" };
+export async function request(path, { method = "GET", body, headers = {}, raw = false, signal } = {}) {
+  const init = { method, headers: { ...headers }, cache: "no-store", signal };
   if (body !== undefined) {
     if (raw) init.body = body;
     else { init.body = JSON.stringify(body); init.headers["Content-Type"] = "application/json"; }
@@ -49,14 +49,15 @@ const afterControl = [];
 /** Run after every control request (status poll, recordings list refresh). */
 export const onControl = (fn) => afterControl.push(fn);
 
-/** A control request with the token; errors go to the #msg line. Returns the document or null. */
-export async function control(path, body, method = "POST") {
+/** A control request with the token; errors go to the message line out (default #msg).
+ * Returns the document or null. */
+export async function control(path, body, method = "POST", out = $("msg")) {
   let doc = null;
   try {
     doc = await request(path, { method, body, headers: authHeader() });
-    $("msg").textContent = "";
+    out.textContent = "";
   } catch (e) {
-    $("msg").textContent = e.message;
+    out.textContent = e.message;
   }
   for (const fn of afterControl) fn();
   return doc;

@@ -1,5 +1,4 @@
-// Live data: the websocket stream (decimated, resumable with ?from=) — the live one, or a
-// replay session's (/ws/replays/{id}, same protocol) — and the status poll.
+// Live data: the websocket stream (decimated, resumable with ?from=) and the status poll.
 import { MAX_POINTS, S, onMessage } from "./state.js";
 import { getJSON } from "./api.js";
 import { setAlarms } from "./alarms.js";
@@ -16,7 +15,7 @@ export async function connect() {
     return retry();
   }
   const proto = location.protocol === "https:" ? "wss" : "ws";
-  let url = `${proto}://${location.host}${S.replay ? S.replay.ws : "/ws/live"}?max_hz=25`;
+  let url = `${proto}://${location.host}/ws/live?max_hz=25`;
   if (S.lastMsgSeq !== null) url += `&from=${S.lastMsgSeq}`;
   const ws = new WebSocket(url);
   S.ws = ws;
@@ -36,21 +35,10 @@ export async function connect() {
     for (const fn of onMessage) fn(m);
     S.dirty = true;
   };
-  ws.onclose = (ev) => {
-    if (S.ws !== ws) return;
-    if (S.replay && (ev.code === 4404 || ev.code === 1001)) return watch(null); // session ended
-    S.connected = false; S.dirty = true; S.reconnects++; retry();
+  ws.onclose = () => {
+    if (S.ws === ws) { S.connected = false; S.dirty = true; S.reconnects++; retry(); }
   };
   ws.onerror = () => ws.close();
-}
-
-/** Show a replay session's stream ({id, ws}) or, with null, the live one; views start empty. */
-export function watch(replay) {
-  S.replay = replay; S.lastMsgSeq = null; S.points = [];
-  const old = S.ws;
-  S.ws = null;
-  if (old) old.close();
-  connect();
 }
 
 function retry() {

@@ -6,15 +6,17 @@ import { drawPlan } from "./plan.js";
 import { drawProfile } from "./profile.js";
 import { drawNeedles } from "./needles.js";
 import { renderAir, renderMessage, renderStatus } from "./readouts.js";
-import { initReplay, renderReplay } from "./replay.js";
+import { initRecordings } from "./recordings.js";
 import { initCalibration } from "./calibration.js";
 import { initRunway } from "./runway.js";
 import { drawStripCharts, initStripCharts } from "./stripchart.js";
 import { initAlarms } from "./alarms.js";
+import { closeLookback, initLookback, openLookback, readUrl } from "./lookback.js";
 
 function render(now) {
   requestAnimationFrame(render);
-  drawStripCharts(now);
+  const lookback = window.radarLookback.active; // live panels hidden: only the live strip
+  if (!lookback) drawStripCharts(now);
   const age = S.lastMsgAt ? (performance.now() - S.lastMsgAt) / 1000 : Infinity;
   const st = S.status;
   const srvAge = st && st.last_frame_age_s !== null ? st.last_frame_age_s : Infinity;
@@ -25,22 +27,28 @@ function render(now) {
   S.dirty = false;
   $("stale").hidden = !stale;
   document.body.classList.toggle("stale", stale);
+  renderStatus(st);
+  if (lookback) { $("mode").textContent = "LOOK-BACK"; return; }
   renderMessage(S.last, stale);
   $("needles").hidden = !(st && st.path);
   if (st && st.path) drawNeedles(stale ? null : S.last);
   renderAir(st);
-  renderStatus(st);
-  renderReplay(st);
-  drawPlan();
-  drawProfile();
+  drawPlan($("plan"));
+  drawProfile($("profile"));
 }
 
+const lookAt = (recording) => openLookback({ recording, columns: [] });
 onControl(poll);
-initReplay();
+initRecordings(lookAt);
 initCalibration();
 initRunway();
 initStripCharts();
 initAlarms();
+initLookback(() => window.radarStrip.available);
+$("to-live").onclick = () => { closeLookback(); S.dirty = true; };
+$("to-lookback").onclick = () => { const id = $("rec-list").value; if (id) lookAt(id); };
+const start = readUrl();
+if (start) openLookback(start, false);
 connect();
 poll();
 setInterval(poll, 500);

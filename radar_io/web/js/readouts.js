@@ -38,13 +38,14 @@ export function renderAir(st) {
   $("air-age").textContent = st && st.airdata && st.airdata.last_sample_age_s !== null ? `${st.airdata.last_sample_age_s.toFixed(1)} s ago` : "";
 }
 
-/** Header tags and the counters table from /api/status. */
+/** The live strip (header: GO, REC, source, rate, frames, alarms; shown in every view) and
+ * the counters table, from /api/status. */
 export function renderStatus(st) {
   $("link").textContent = S.connected ? "ONLINE" : "OFFLINE";
   $("link").className = "tag " + (S.connected ? "ok" : "bad");
   $("c-points").textContent = S.points.length;
   if (!st) return;
-  $("mode").textContent = S.replay ? "REPLAY" : st.mode.toUpperCase();
+  $("mode").textContent = st.mode.toUpperCase();
   $("source").textContent = st.source + (st.connected ? "" : ` (disconnected: ${st.last_error || "…"})`);
   $("calib").textContent = `cal: ${st.calibration}`;
   $("cal-active").textContent = st.calibration;
@@ -55,4 +56,7 @@ export function renderStatus(st) {
   $("c-disc").textContent = st.bytes_discarded; $("c-gaps").textContent = st.seq_gaps;
   $("c-ws").textContent = st.ws_clients; $("c-drop").textContent = st.ws_dropped;
   $("c-reconn").textContent = st.reconnects;
+  $("ls-go").className = "tag " + (st.go && st.connected ? "ok" : "off");
+  $("ls-rate").textContent = fmt(st.rate_hz, 0) + " Hz";
+  $("ls-frames").textContent = `${st.frames} frames`;
 }

@@ -7,7 +7,6 @@ export const STALE_S = 1.0;      // no message for this long → STALE banner
 export const S = (window.radarState = {
   points: [],            // {x, y, h, g, sync, s}: rx-good positions in the radar frame (m)
   lastMsgSeq: null,      // resume point for ws ?from=
-  replay: null,          // the replay session shown instead of the live stream: {id, ws}
   instance: null,        // server instance: a change means the server restarted
   lastMsgAt: 0,          // performance.now() of the last message
   last: null,            // last measurement message

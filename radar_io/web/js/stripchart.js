@@ -8,7 +8,8 @@ export const KEEP = 3000;          // messages kept (2 min at the websocket's 25
 export const REDRAW_S = 0.25;      // charts refreshed at most this often
 export const STORE_KEY = "radar_io_strip_columns";
 const SKIP = new Set(["msg_seq", "t_ns"]); // bookkeeping, not measurements
-const COLORS = ["#3b82f6", "#d29922", "#2ea043", "#f778ba", "#a371f7", "#da3633"];
+export const COLORS = ["#3b82f6", "#d29922", "#2ea043", "#f778ba", "#a371f7", "#da3633"];
+export const AXIS = { stroke: "#7a8494", grid: { stroke: "#30363d", width: 1 }, ticks: { stroke: "#30363d" } };
 
 const T = (window.radarStrip = { columns: [], available: [], charts: {}, messages: [], draws: 0 });
 let lastDraw = 0;
@@ -33,18 +34,18 @@ export function seriesOf(column) {
 }
 
 function options(column, i) {
-  const axis = { stroke: "#7a8494", grid: { stroke: "#30363d", width: 1 }, ticks: { stroke: "#30363d" } };
   return {
     width: 640, height: 140, legend: { show: true },
     tzDate: (ts) => uPlot.tzDate(new Date(ts * 1e3), "Etc/UTC"), // axis in UTC, not browser time
     scales: { x: { time: true } },
     series: [{ label: "UTC" }, { label: column, stroke: COLORS[i % COLORS.length], width: 1.5, spanGaps: false }],
-    axes: [{ ...axis }, { ...axis, size: 60 }],
+    axes: [{ ...AXIS }, { ...AXIS, size: 60 }],
   };
 }
 
-function addChart(column) {
-  if (T.charts[column]) return;
+/** A chart's box in parent: a head (the column's name, extra elements, a × button) above
+ * the element uPlot draws in. */
+export function chartBox(parent, column, ...extra) {
   const box = document.createElement("div");
   box.className = "strip";
   box.dataset.column = column;
@@ -54,11 +55,17 @@ function addChart(column) {
   name.textContent = column;
   const close = document.createElement("button");
   close.textContent = "×"; close.title = `remove ${column}`;
-  close.onclick = () => removeColumn(column);
-  head.append(name, close);
+  head.append(name, ...extra, close);
   const plot = document.createElement("div");
   box.append(head, plot);
-  $("strip-charts").appendChild(box);
+  parent.appendChild(box);
+  return { box, plot, close };
+}
+
+function addChart(column) {
+  if (T.charts[column]) return;
+  const { plot, close } = chartBox($("strip-charts"), column);
+  close.onclick = () => removeColumn(column);
   T.charts[column] = new uPlot(options(column, Object.keys(T.charts).length), seriesOf(column), plot);
 }
 
