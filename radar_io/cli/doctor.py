@@ -141,8 +141,8 @@ def check_source(url: str, timeout_s: float = 3.0, spec: Any = None) -> Check:
         src.open()
     except RadarIOError as exc:
         dev = _device_of(url)
-        fix = (f"check the cable and the device name (ls /dev/ttyUSB* /dev/serial/by-id/); "
-               f"set source in the config" if dev else "check the source URL")
+        fix = ("check the cable and the device name (ls /dev/ttyUSB* /dev/serial/by-id/); "
+               "set source in the config" if dev else "check the source URL")
         return Check("FAIL", "source", f"cannot open {url}: {exc}", fix)
     framer = BatchFramer(spec)
     nbytes = 0
@@ -195,7 +195,7 @@ def check_clock() -> Check:
         return Check("OK", "clock", "synchronised (/run/systemd/timesync/synchronized)")
     out = _run(["chronyc", "tracking"])
     if out is not None:
-        kv = {k.strip(): v.strip() for k, _, v in (l.partition(":") for l in out.splitlines())}
+        kv = {k.strip(): v.strip() for k, _, v in (line.partition(":") for line in out.splitlines())}
         status = kv.get("Leap status", "?")
         if status == "Normal":
             return Check("OK", "clock", f"synchronised (chronyc: {kv.get('System time', '')})")
