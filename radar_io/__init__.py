@@ -25,15 +25,18 @@ _LAZY: dict[str, str] = {
 _ERRORS = ("RadarIOError", "ValidationError", "ConfigError", "SpecError", "FrameError",
            "EncodeError", "RecordingError", "NotFoundError", "ConflictError", "UnavailableError",
            "SourceError", "UplinkError", "StorageError")
-_LAZY.update({name: "radar_io.errors" for name in _ERRORS})
+_LAZY.update(dict.fromkeys(_ERRORS, "radar_io.errors"))
 
-if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs
-    from radar_io.decoding.biases import Calibration, load_calibration, save_calibration
-    from radar_io.decoding.batch_decoder import decode_bytes, iter_decode
-    from radar_io.decoding.measurement import MeasurementBatch
+if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs; `X as X` re-exports
+    from radar_io.decoding.batch_decoder import decode_bytes as decode_bytes
+    from radar_io.decoding.batch_decoder import iter_decode as iter_decode
+    from radar_io.decoding.biases import Calibration as Calibration
+    from radar_io.decoding.biases import load_calibration as load_calibration
+    from radar_io.decoding.biases import save_calibration as save_calibration
+    from radar_io.decoding.measurement import MeasurementBatch as MeasurementBatch
     from radar_io.errors import *  # noqa: F403
-    from radar_io.sinks import open_sink
-    from radar_io.sources import open_source
+    from radar_io.sinks import open_sink as open_sink
+    from radar_io.sources import open_source as open_source
 
 
 def __getattr__(name: str) -> Any:
@@ -49,4 +52,4 @@ def __dir__() -> list[str]:
     return sorted([*globals(), *_LAZY])
 
 
-__all__ = ["__version__", *_LAZY]
+__all__ = ["__version__", *_LAZY]  # noqa: PLE0604 - the keys of _LAZY are names

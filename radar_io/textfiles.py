@@ -221,7 +221,7 @@ class Fields:
             self.fail(key, "must not be empty")
         return v
 
-    def table(self, key: str, *, required: bool = True) -> "Fields | None":
+    def table(self, key: str, *, required: bool = True) -> Fields | None:
         """The sub-table ``key`` (None when absent and not required)."""
         v = self._get(key, _MISSING if required else None)
         if v is None and key not in self.doc:
@@ -239,7 +239,7 @@ class Fields:
             self.fail(key, f"expected a table, got {_kind(v)} {show(v)}")
         return dict(v)
 
-    def tables(self, key: str, *, min_count: int = 0) -> list["Fields"]:
+    def tables(self, key: str, *, min_count: int = 0) -> list[Fields]:
         """An array of tables (TOML ``[[key]]`` / JSON list of objects)."""
         v = self._get(key, _MISSING if min_count else [])
         if not isinstance(v, list):

@@ -74,7 +74,7 @@ def test_no_import_cycle_inside_the_package():
         stack.append(m)
         for d in sorted(graph[m]):
             if state.get(d) == 1 and not m.startswith(d + "."):
-                cycle = stack[stack.index(d):] + [d]
+                cycle = [*stack[stack.index(d):], d]
                 raise AssertionError("import cycle: " + " -> ".join(cycle))
             if d not in state:
                 visit(d)
@@ -105,7 +105,7 @@ def test_source_registry_by_scheme(tmp_path):
     assert type(loop).__name__ == "SerialSource"
     with pytest.raises(SourceError):
         open_source("")
-    with pytest.raises(RadarIOError, match="not found|cannot open|No such"):
+    with pytest.raises(RadarIOError, match=r"not found|cannot open|No such"):
         open_source(f"replay://{tmp_path}/missing.rdrlog")
 
 

@@ -11,19 +11,18 @@ import duckdb
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-
 from conftest import ROOT, run_cli
+
 from radar_io.coordinates.reference_path import add_deviation, load_path
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.decoders import decode_bytes
 from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.wirespec.frame import load_spec
 
-
 PATH = ROOT / "firmware_specs" / "paths" / "demo_track_radar.toml"
 SITE = ROOT / "firmware_specs" / "sites" / "demo.toml"
-DAY1 = dt.datetime(2026, 5, 1, 9, 30, tzinfo=dt.timezone.utc)
-DAY2 = dt.datetime(2026, 5, 2, 14, 0, tzinfo=dt.timezone.utc)
+DAY1 = dt.datetime(2026, 5, 1, 9, 30, tzinfo=dt.UTC)
+DAY2 = dt.datetime(2026, 5, 2, 14, 0, tzinfo=dt.UTC)
 
 
 def _sim(tmp, name, *extra) -> bytes:
@@ -73,6 +72,7 @@ def _glob(out) -> str:
     return str(out / "**" / "*.parquet")
 
 
+@pytest.mark.slow
 def test_layout_row_counts_and_partition_columns_in_duckdb(archived):
     out, ref = archived
     files = sorted(p.relative_to(out).as_posix() for p in out.rglob("*.parquet"))
@@ -96,7 +96,7 @@ def test_layout_row_counts_and_partition_columns_in_duckdb(archived):
     b = ref["flight-3"]
     assert names == list(b.columns)
     want = [tuple(None if isinstance(v, float) and math.isnan(v) else v for v in row)
-            for row in zip(*(b[c].tolist() for c in b.columns))]
+            for row in zip(*(b[c].tolist() for c in b.columns), strict=True)]
     assert got == want
     md = pq.read_metadata(out / "site=range-a/date=2026-05-01/recording=flight-1/part-0.parquet")
     kv = {k.decode(): v.decode() for k, v in md.metadata.items()}
@@ -105,6 +105,7 @@ def test_layout_row_counts_and_partition_columns_in_duckdb(archived):
     assert int(kv["radar_io.crc_errors"]) == ref["flight-1"].stats["crc_errors"] > 0
 
 
+@pytest.mark.slow
 def test_rerun_is_idempotent_and_rewrites_only_what_changed(campaign, archived, tmp_path):
     d, payloads = campaign
     out, _ = archived
@@ -130,6 +131,7 @@ def test_rerun_is_idempotent_and_rewrites_only_what_changed(campaign, archived, 
     assert not [p for p in out.rglob("*") if p.name.endswith(".part")]
 
 
+@pytest.mark.slow
 def test_archive_recording_api_uses_the_header_site(campaign, tmp_path):
     from radar_io.analysis.archive import archive_recording
 
@@ -173,6 +175,7 @@ def _valid(b) -> np.ndarray:
     return (b["go"] == 1) & (b["rx_good"] == 1)
 
 
+@pytest.mark.slow
 def test_doc_queries_dy_dz_per_run(archived):
     out, ref = archived
     rows = _run(_doc_queries()["dy_dz_per_run"], out)
@@ -215,6 +218,7 @@ def test_doc_queries_crc_errors_per_day(archived):
     assert day1 > 0
 
 
+@pytest.mark.slow
 def test_a_damaged_recording_is_one_line_and_the_others_are_archived(campaign, tmp_path):
     d, _ = campaign
     recs = tmp_path / "recs"

@@ -10,8 +10,8 @@ import sys
 
 import numpy as np
 import pytest
-
 from conftest import ROOT, run_cli
+
 from radar_io.decoding.decoders import DECODE_COLUMNS, decode_bytes
 from radar_io.recording.rdrlog import RecordingReader
 
@@ -28,6 +28,7 @@ def sim_recording(tmp_path_factory):
     return rec
 
 
+@pytest.mark.slow
 def test_simulate_to_rdrlog_then_decode_csv(sim_recording, tmp_path):
     out, stats = tmp_path / "t.csv", tmp_path / "s.json"
     r = run_cli("decode", str(sim_recording), "-o", str(out), "--stats", str(stats))
@@ -54,6 +55,7 @@ def test_simulate_to_rdrlog_then_decode_csv(sim_recording, tmp_path):
         b["x_m"][:500].tolist(), nan_ok=True, rel=0, abs=0)
 
 
+@pytest.mark.slow
 def test_decode_jsonl_with_site_and_calibration(sim_recording, tmp_path):
     cal = tmp_path / "cal.json"
     cal.write_text(json.dumps({"format": "radar_io-calibration/1", "id": "t1",
@@ -72,6 +74,7 @@ def test_decode_jsonl_with_site_and_calibration(sim_recording, tmp_path):
     assert all(35.3 < o["lat_deg"] < 35.8 for o in good)
 
 
+@pytest.mark.slow
 def test_damaged_raw_capture_and_stdin(tmp_path):
     raw = tmp_path / "raw.bin"
     r = run_cli("simulate", "-o", str(raw), "--duration-s", "5", "--flip-rate", "0.002",
@@ -87,6 +90,7 @@ def test_damaged_raw_capture_and_stdin(tmp_path):
     assert len(r.stdout.splitlines()) == want["frames"]
 
 
+@pytest.mark.slow
 def test_simulate_pipe_into_decode():
     sim = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "simulate", "--duration-s", "2"],
                            stdout=subprocess.PIPE, cwd=ROOT)
@@ -96,6 +100,7 @@ def test_simulate_pipe_into_decode():
     assert dec.returncode == 0 and len(dec.stdout.splitlines()) == 2001
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args,needle", [
     (("decode", "/nonexistent/x.bin"), "input not found"),
     (("decode",), "required"),
@@ -117,6 +122,7 @@ def test_bad_input_is_one_clear_line(args, needle):
     assert len(err.strip().splitlines()) == 1, err
 
 
+@pytest.mark.slow
 def test_raw_garbage_decodes_to_nothing_without_error(tmp_path):
     p = tmp_path / "junk.bin"
     p.write_bytes(bytes(range(256)) * 100)
@@ -126,6 +132,7 @@ def test_raw_garbage_decodes_to_nothing_without_error(tmp_path):
     assert json.loads((tmp_path / "s.json").read_text())["bytes_discarded"] == 25600
 
 
+@pytest.mark.slow
 def test_bench_reports_all_figures():
     r = run_cli("bench", "--json", "--frames", "20000", "--repeat", "1", "--core-only")
     assert r.returncode == 0, r.stderr
@@ -135,6 +142,7 @@ def test_bench_reports_all_figures():
     assert 0.95 * 20000 > res["batch_damaged_1pct_accepted"] > 0.5 * 20000
 
 
+@pytest.mark.slow
 def test_monitor_shows_a_live_line():
     r = run_cli("monitor", "--duration-s", "2.5")
     out = r.stdout.decode()
@@ -151,6 +159,7 @@ sys.exit(rc)
 """
 
 
+@pytest.mark.slow
 def test_decode_streams_in_constant_memory(tmp_path, spec):
     """Peak RSS does not grow with the recording: 10× the frames, about the same memory."""
     from radar_io.recording.rdrlog import RecordingWriter
@@ -173,6 +182,7 @@ def test_decode_streams_in_constant_memory(tmp_path, spec):
     assert peaks[40] - peaks[4] < 30, peaks
 
 
+@pytest.mark.slow
 def test_simulate_to_a_serial_device_in_real_time():
     """`-o /dev/pts/N`: the simulator paces its frames to the serial line like a radar."""
     import os
@@ -198,6 +208,7 @@ def test_simulate_to_a_serial_device_in_real_time():
     assert elapsed > 0.9  # paced, not dumped
 
 
+@pytest.mark.slow
 def test_decode_with_path_tlm_and_da_outputs(sim_recording, tmp_path):
     """--path adds the deviation columns; --tlm-out / --da-out write what the aircraft and the
     recorders decode back to the same numbers (struct + binascii here, not the project's decoder)."""
@@ -217,7 +228,7 @@ def test_decode_with_path_tlm_and_da_outputs(sim_recording, tmp_path):
     assert len(data) == 26 * len(valid)
     for k in range(0, len(valid), 997):
         fr = data[26 * k:26 * (k + 1)]
-        sync, seq, *ch = struct.unpack(">HH10h", fr[:24])
+        sync, _seq, *ch = struct.unpack(">HH10h", fr[:24])
         assert sync == 0x1ACF and binascii.crc_hqx(fr[:24], 0xFFFF) == struct.unpack(">H", fr[24:])[0]
         dz = float(valid[k]["dz_m"])
         want = max(-32767, min(32767, round(dz / 150.0 * 32767)))

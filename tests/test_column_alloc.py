@@ -7,11 +7,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import assert_golden
+
 from radar_io.decoding import batch_decoder
 from radar_io.decoding.batch_decoder import ALLOC_MODES, column_array, decode_bytes
 from radar_io.errors import ConfigError
+
 
 @pytest.mark.parametrize("mode", ALLOC_MODES)
 def test_every_mode_reproduces_the_golden_decode(golden, mode, monkeypatch):
@@ -32,11 +33,12 @@ def test_large_column_is_writable_and_keeps_its_values(mode):
 
 
 def test_unknown_mode_is_one_line_naming_the_setting_and_the_modes():
-    with pytest.raises(ConfigError, match="RADAR_IO_COLUMN_ALLOC.*huge_populate") as e:
+    with pytest.raises(ConfigError, match=r"RADAR_IO_COLUMN_ALLOC.*huge_populate") as e:
         column_array(10, np.float64, "hugepages")
     assert "\n" not in str(e.value)
 
 
+@pytest.mark.slow
 def test_environment_chooses_the_mode_in_a_fresh_process(tmp_path):
     """``RADAR_IO_COLUMN_ALLOC`` is read at import; the decode is the same with huge pages."""
     import os

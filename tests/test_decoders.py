@@ -5,13 +5,13 @@ from __future__ import annotations
 import json
 import math
 
+import independent
 import numpy as np
 import pytest
+from conftest import assert_golden
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import independent
-from conftest import assert_golden
 from radar_io.decoding.decoders import DECODE_COLUMNS, BatchDecoder, FrameDecoder, decode_bytes
 from radar_io.encoding.rdr1 import FrameEncoder, encode_frames, raw_words
 from radar_io.framing.framers import BatchFramer
@@ -35,7 +35,7 @@ def test_shared_vectors_decode_bit_for_bit(vectors, spec):
     per = FrameDecoder(spec)
     batch = decode_bytes(b"".join(frames))
     assert batch.stats["frames"] == len(frames) and batch.stats["crc_errors"] == 0
-    for i, (fr, v) in enumerate(zip(frames, vectors["frames"])):
+    for i, (fr, v) in enumerate(zip(frames, vectors["frames"], strict=True)):
         m = per.decode(fr)
         for key, want in v["expect"].items():
             col = VEC_KEYS.get(key, key)
@@ -52,6 +52,7 @@ words = st.fixed_dictionaries({
 })
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.lists(words, min_size=1, max_size=40))
 def test_independent_frames_decode_identically_in_both_decoders(spec, ws):
@@ -73,6 +74,7 @@ def test_independent_frames_decode_identically_in_both_decoders(spec, ws):
             assert _same(None if math.isnan(b) else b, want[col], 1e-6), col
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.binary(min_size=20, max_size=20), min_size=1, max_size=30),
        st.floats(-50, 50), st.floats(-1, 1), st.floats(-1, 1))
@@ -101,6 +103,7 @@ def test_per_frame_and_batch_agree_on_arbitrary_frames(spec, bodies, b_sr, b_el,
             assert _same(b, got[col], tol), (col, b, got[col])
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(words)
 def test_project_encoders_match_the_independent_encoder(spec, w):
@@ -111,6 +114,7 @@ def test_project_encoders_match_the_independent_encoder(spec, w):
     assert encode_frames(spec, {k: np.array([v]) for k, v in raw.items()}) == want
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(sr=st.floats(0, 65535), dsr=st.floats(-50, 49.97), el=st.floats(-180, 179.99),
        dele=st.floats(-1, 0.999), az=st.floats(0, 359.99), daz=st.floats(-1, 0.999),
@@ -180,6 +184,7 @@ def test_batch_decoder_accepts_blocks_and_set_calibration(spec):
 
 
 # ---------------------------------------------------------------- chunked decode
+@pytest.mark.slow
 @pytest.mark.parametrize("block_frames", [65536, 1000, 7, 3])
 @pytest.mark.parametrize("name", ["clean", "damaged"])
 def test_decode_bytes_reproduces_the_previous_decoder_exactly(golden, name, block_frames):
@@ -210,6 +215,7 @@ def _same_rows(batch_cols: dict, rows: list[dict]) -> None:
         assert np.allclose(v.astype(np.float64), want, rtol=0, atol=tol, equal_nan=True), col
 
 
+@pytest.mark.slow
 def test_iter_decode_every_split_point_of_a_damaged_stream(spec, golden):
     """Two chunks split at every byte, tiny blocks: same frames and counters as the per-frame path."""
     from radar_io.decoding.batch_decoder import BatchDecoder, iter_decode
@@ -232,7 +238,7 @@ def test_iter_decode_every_split_point_of_a_damaged_stream(spec, golden):
 def test_decode_bytes_every_block_split_of_a_damaged_stream(spec, golden, block_frames):
     """Block boundaries fall at every phase of the frames: nothing lost, nothing doubled."""
     data = golden["input_damaged"].tobytes()[:24 * 400]
-    rows, stats = _per_frame(data, spec)
+    _rows, stats = _per_frame(data, spec)
     for shift in range(0, 24, 5):                  # move every boundary inside the frames
         b = decode_bytes(data[shift:], block_frames=block_frames)
         want_rows, want_stats = _per_frame(data[shift:], spec)
@@ -267,15 +273,17 @@ def test_iter_decode_takes_bytes_paths_files_and_chunk_iterables(tmp_path, golde
     p = tmp_path / "capture.bin"
     p.write_bytes(data)
     chunks = [data[i:i + 1000] for i in range(0, len(data), 1000)]
-    for source in (data, memoryview(data), str(p), p, open(p, "rb"), iter(chunks)):
-        batches = list(iter_decode(source, block_frames=512))
-        assert all(1 <= len(b) <= 512 for b in batches[:-1]) and len(batches[-1]) == 0
-        assert batches[-1].stats == want.stats
-        for col in want.columns:
-            got = np.concatenate([b[col] for b in batches])
-            assert np.array_equal(got, want[col], equal_nan=got.dtype.kind == "f"), col
+    with open(p, "rb") as f:
+        for source in (data, memoryview(data), str(p), p, f, iter(chunks)):
+            batches = list(iter_decode(source, block_frames=512))
+            assert all(1 <= len(b) <= 512 for b in batches[:-1]) and len(batches[-1]) == 0
+            assert batches[-1].stats == want.stats
+            for col in want.columns:
+                got = np.concatenate([b[col] for b in batches])
+                assert np.array_equal(got, want[col], equal_nan=got.dtype.kind == "f"), col
 
 
+@pytest.mark.slow
 def test_bench_measures_a_fresh_process_with_anchors_from_the_same_run():
     """`radar-io bench --json`: fresh-child figures and anchors that agree with each other."""
 

@@ -8,8 +8,8 @@ import re
 import threading
 
 import pytest
-
 from conftest import run_cli
+
 from radar_io.cli import doctor
 
 
@@ -48,6 +48,7 @@ def test_doctor_with_a_missing_device_fails_with_the_fix(tmp_path):
     assert "FAIL" in r.stderr.decode().splitlines()[-1]
 
 
+@pytest.mark.slow
 def test_source_check_on_a_pty(spec):
     """A real terminal pair: silent, then carrying garbage, then simulated RDR1 frames."""
     import pty

@@ -5,12 +5,12 @@ from __future__ import annotations
 import binascii
 import random
 
+import independent
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import independent
 from radar_io.framing.framers import BatchFramer, Framer
 
 
@@ -26,8 +26,8 @@ def reference(data: bytes, sync: bytes = b"\xeb\x90", length: int = 24,
 
     Defaults: RDR1. The CRC is the last two bytes, over everything before them; SEQ is bytes 2-3.
     """
-    frames, st, pos, last = [], dict(frames=0, crc_errors=0, implausible=0, bytes_discarded=0,
-                                     seq_gaps=0), 0, None
+    frames, st, pos, last = [], {"frames": 0, "crc_errors": 0, "implausible": 0, "bytes_discarded": 0,
+                                     "seq_gaps": 0}, 0, None
     while pos + length <= len(data):
         fr = data[pos:pos + length]
         if fr[:2] != sync:
@@ -117,6 +117,7 @@ damaged_streams = st.builds(
     st.integers(0, 10), st.integers(0, 10))
 
 
+@pytest.mark.slow
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(damaged_streams, st.integers(0, 1000), st.sampled_from([1, 7, 24, 25, 100, 5000]))
 def test_both_framers_match_the_reference_under_any_chunking(data, seed, mean):
@@ -141,7 +142,7 @@ def test_clean_stream_megabytes_in_one_go_and_byte_by_byte():
     data = b"".join(frames)
     out, st = run_batch(data, [])
     assert out == frames
-    assert st == dict(frames=5000, crc_errors=0, implausible=0, bytes_discarded=0, seq_gaps=0)
+    assert st == {"frames": 5000, "crc_errors": 0, "implausible": 0, "bytes_discarded": 0, "seq_gaps": 0}
     out1, st1 = run_per_frame(data[:24 * 300], [1] * (24 * 300))
     assert out1 == frames[:300] and st1["frames"] == 300 and st1["bytes_discarded"] == 0
 
@@ -149,7 +150,7 @@ def test_clean_stream_megabytes_in_one_go_and_byte_by_byte():
 def test_garbage_between_frames_is_counted_exactly():
     frames = stream(50)
     junk = [bytes([0x11] * k) for k in range(50)]  # no 0xEB anywhere in the junk
-    data = b"".join(j + f for j, f in zip(junk, frames)) + b"\x22" * 7
+    data = b"".join(j + f for j, f in zip(junk, frames, strict=True)) + b"\x22" * 7
     for run in (run_per_frame, run_batch):
         out, st = run(data, [37] * 200)
         assert out == frames
@@ -165,7 +166,7 @@ def test_bit_flipped_frame_is_a_crc_error_and_a_seq_gap():
     for run in (run_per_frame, run_batch):
         out, st = run(data, [])
         assert out == frames[:4] + frames[5:]
-        assert st == dict(frames=9, crc_errors=1, implausible=0, bytes_discarded=24, seq_gaps=1)
+        assert st == {"frames": 9, "crc_errors": 1, "implausible": 0, "bytes_discarded": 24, "seq_gaps": 1}
 
 
 def test_truncated_frame_then_resync():
@@ -199,8 +200,8 @@ def test_seq_gaps_modulo_2_16(seqs, gaps):
         assert run(data, [])[1]["seq_gaps"] == gaps
 
 
-@pytest.mark.parametrize("kw", [dict(dsr=0x1800), dict(dele=0xF800), dict(daz=0x2000),
-                                dict(tod=864_000_000), dict(tod=0xFFFFFFFF)])
+@pytest.mark.parametrize("kw", [{"dsr": 0x1800}, {"dele": 0xF800}, {"daz": 0x2000},
+                                {"tod": 864_000_000}, {"tod": 0xFFFFFFFF}])
 def test_crc_valid_but_implausible_frames_are_rejected_and_counted(kw):
     good = [independent.frame(seq=i) for i in range(3)]
     data = good[0] + independent.frame(seq=1, **kw) + good[1] + good[2]
@@ -247,6 +248,7 @@ def test_batch_framer_large_damaged_stream_matches_per_frame():
     assert np.all([len(f) == 24 for f in a[0]])
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(damaged_streams, st.integers(1, 97), st.integers(1, 9), st.integers(0, 1000))
 def test_batch_framer_window_and_block_boundaries(data, window, block, seed):
@@ -293,6 +295,7 @@ def test_tlm1_uses_the_rdr1_seq_gap_rule(seqs, gaps):
     assert run_per_frame(rdr, [])[1]["seq_gaps"] == gaps
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.integers(0, 80), st.integers(0, 10_000), st.integers(0, 30), st.integers(0, 8),
        st.integers(0, 8), st.integers(0, 8), st.integers(1, 60))

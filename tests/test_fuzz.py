@@ -7,6 +7,7 @@ its figures are in docs/fuzzing.md (same tests, ``FUZZ_EXAMPLES=...``).
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -15,11 +16,12 @@ import zlib
 from pathlib import Path
 from typing import Any
 
+import independent
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import independent
 from radar_io.errors import RecordingError, ValidationError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -162,48 +164,56 @@ def check_load(kind: str, data: bytes, d: Path) -> None:
 
 
 # ------------------------------------------------------------------ loaders
+@pytest.mark.slow
 @FUZZ
 @given(doc=mutated(SITE_DOC))
 def test_fuzz_site_fields(doc, tmp_path):
     check_load("site", to_toml(doc).encode("utf-8", "surrogatepass"), tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(doc=mutated(PATH_DOC))
 def test_fuzz_path_fields(doc, tmp_path):
     check_load("path", to_toml(doc).encode("utf-8", "surrogatepass"), tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(doc=mutated(CAL_DOC))
 def test_fuzz_calibration_fields(doc, tmp_path):
     check_load("calibration", json.dumps(doc).encode("utf-8", "surrogatepass"), tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.one_of(text_mutations(to_toml(SITE_DOC)), st.binary(max_size=200)))
 def test_fuzz_site_bytes(data, tmp_path):
     check_load("site", data, tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.one_of(text_mutations(to_toml(PATH_DOC)), st.binary(max_size=200)))
 def test_fuzz_path_bytes(data, tmp_path):
     check_load("path", data, tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.one_of(text_mutations(json.dumps(CAL_DOC)), st.binary(max_size=200)))
 def test_fuzz_calibration_bytes(data, tmp_path):
     check_load("calibration", data, tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.one_of(text_mutations(DBC_TEXT), st.binary(max_size=200)))
 def test_fuzz_dbc_bytes(data, tmp_path):
     check_load("dbc", data, tmp_path)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.one_of(text_mutations(CSV_TEXT), st.binary(max_size=200)))
 def test_fuzz_calibration_points_bytes(data, tmp_path):
@@ -249,9 +259,10 @@ def chunked(draw: Any) -> tuple[bytes, list[int]]:
 
 def pieces(data: bytes, cuts: list[int]) -> list[bytes]:
     bounds = [0, *cuts, len(data)]
-    return [data[a:b] for a, b in zip(bounds, bounds[1:])]
+    return [data[a:b] for a, b in itertools.pairwise(bounds)]
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=st.one_of(st.binary(max_size=600), streams()))
 def test_fuzz_decode_bytes(data, spec):
@@ -264,6 +275,7 @@ def test_fuzz_decode_bytes(data, spec):
     assert n * 24 <= len(data)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(case=chunked())
 def test_fuzz_framer_random_chunking_equals_one_feed(case, spec):
@@ -309,6 +321,7 @@ def recordings(draw: Any) -> bytes:
     return bytes(out)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(data=recordings())
 def test_fuzz_recording_reader(data, tmp_path):

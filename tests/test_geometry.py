@@ -7,9 +7,9 @@ import pymap3d
 import pytest
 from pyproj import Transformer
 
+from radar_io.coordinates.transforms import geodetic, load_site, radar_sea, radar_xyh, runway_xyh
 from radar_io.decoding.decoders import decode_bytes
 from radar_io.encoding.rdr1 import encode_frames, raw_words
-from radar_io.coordinates.transforms import geodetic, load_site, radar_sea, radar_xyh, runway_xyh
 from radar_io.wirespec.frame import spec_dir
 
 rng = np.random.default_rng(42)
@@ -94,7 +94,7 @@ def test_decoder_site_columns_match_the_functions(spec):
             "el_deg": EL[:5], "del_deg": np.zeros(5), "az_deg": AZ[:5], "daz_deg": np.zeros(5),
             "status_raw": np.array([5, 5, 5, 1, 5])}
     b = decode_bytes(encode_frames(spec, raw_words(spec, vals)), site=SITE)
-    lat, lon, hae = geodetic(b["sr_c_m"], b["el_c_deg"], b["az_c_deg"], SITE)
+    lat, _lon, _hae = geodetic(b["sr_c_m"], b["el_c_deg"], b["az_c_deg"], SITE)
     np.testing.assert_array_equal(b["lat_deg"], lat)
     assert np.isnan(b["lat_deg"][3]) and np.isnan(b["xr_m"][3])
     from radar_io.decoding.decoders import FrameDecoder

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import pytest
 
@@ -236,6 +236,7 @@ def test_loader_names_file_and_field(case, tmp_path):
     assert case.expect in msg
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=IDS)
 def test_cli_exits_2_with_one_line(case, tmp_path, capsys):
     from radar_io.cli.main import main
@@ -249,6 +250,7 @@ def test_cli_exits_2_with_one_line(case, tmp_path, capsys):
     assert lines[0].startswith("radar-io: error: ") and str(f) in lines[0] and case.expect in lines[0]
 
 
+@pytest.mark.slow
 def test_cli_as_a_process_prints_no_traceback(tmp_path):
     """The operator's view: a separate process, exit code 2, one line on stderr."""
     from conftest import run_cli
@@ -277,7 +279,7 @@ def test_site_by_name_and_asterix(tmp_path):
     assert plain.asterix_sac is None and "asterix" not in plain.to_dict()
     f.write_text(SITE_MIN + "[asterix]\nsac = 255\nsic = 0\n")
     assert (load_site(f).asterix_sac, load_site(f).asterix_sic) == (255, 0)
-    with pytest.raises(ValidationError, match="no packaged site of that name .*demo"):
+    with pytest.raises(ValidationError, match=r"no packaged site of that name .*demo"):
         load_site("no_such_site")
 
 
@@ -352,6 +354,7 @@ def test_tests_read_nothing_beside_the_repository():
     assert not hits, hits
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ci, rc", [("", 0), ("true", 1)])
 def test_a_skip_fails_the_session_only_in_ci(tmp_path, ci, rc):
     """tests/conftest.py: require_program skips with the reason; with CI=true that fails the run."""

@@ -16,8 +16,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-
 from conftest import ROOT, run_cli
+
 from radar_io.decoding.decoders import POSITION_COLUMNS, decode_bytes
 from radar_io.recording.rdrlog import RecordingReader
 from radar_io.sinks import TABLE_FORMATS, open_table, table_format
@@ -60,10 +60,11 @@ def _rows(batch) -> list[tuple]:
     """The batch as Python rows, NaN → None."""
     cols = [batch[c].tolist() for c in batch.columns]
     return [tuple(None if isinstance(v, float) and math.isnan(v) else v for v in row)
-            for row in zip(*cols)]
+            for row in zip(*cols, strict=True)]
 
 
 # -- batch_to_arrow ---------------------------------------------------------------------
+@pytest.mark.slow
 def test_batch_to_arrow_shares_buffers_nulls_ng_and_names_units(reference):
     rb = batch_to_arrow(reference, {"site": "demo"})
     assert rb.schema.names == list(reference.columns)
@@ -95,6 +96,7 @@ def test_table_format_from_extension_or_option():
 
 
 # -- the CLI's files read back -----------------------------------------------------------
+@pytest.mark.slow
 def test_parquet_read_by_pyarrow_and_duckdb_gives_decode_bytes_rows(decoded, reference,
                                                                     recording):
     import duckdb
@@ -122,6 +124,7 @@ def test_parquet_read_by_pyarrow_and_duckdb_gives_decode_bytes_rows(decoded, ref
     assert f.schema_arrow.field("h_m").metadata[b"unit"] == b"m"
 
 
+@pytest.mark.slow
 def test_arrow_ipc_read_back_equals_parquet(decoded):
     with pa.memory_map(str(decoded["arrow"])) as src:
         t = pa.ipc.open_file(src).read_all()
@@ -129,6 +132,7 @@ def test_arrow_ipc_read_back_equals_parquet(decoded):
     assert t.equals(p, check_metadata=True)
 
 
+@pytest.mark.slow
 def test_every_format_same_columns_same_order_same_values(decoded, reference):
     cols = list(reference.columns)
     with open(decoded["csv"], newline="") as f:
@@ -145,7 +149,7 @@ def test_every_format_same_columns_same_order_same_values(decoded, reference):
     # text formats give the decoder's float64 to the last bit (shortest round-trip text)
     assert [tuple(o.values()) for o in objs] == want
     parsed = [tuple(None if v == "" else (float(v) if isinstance(w, float) else int(v))
-                    for v, w in zip(r, wr)) for r, wr in zip(rows[1:], want)]
+                    for v, w in zip(r, wr, strict=True)) for r, wr in zip(rows[1:], want, strict=True)]
     assert parsed == want
 
 
@@ -169,6 +173,7 @@ def test_writers_stream_in_row_groups(reference, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["small_groups.parquet"]
 
 
+@pytest.mark.slow
 def test_no_frames_gives_a_complete_empty_table_with_the_columns(tmp_path):
     garbage = tmp_path / "garbage.bin"
     garbage.write_bytes(np.random.default_rng(7).integers(0, 256, 50_000, np.uint8)
@@ -191,6 +196,7 @@ def _leftovers(d, name):
     return sorted(p.name for p in d.iterdir() if name in p.name)
 
 
+@pytest.mark.slow
 def test_damaged_recording_header_one_line_error_and_no_output(recording, tmp_path):
     bad = tmp_path / "bad.rdrlog"
     data = bytearray(recording.read_bytes())
@@ -205,6 +211,7 @@ def test_damaged_recording_header_one_line_error_and_no_output(recording, tmp_pa
         assert _leftovers(tmp_path, f"bad.{fmt}") == []
 
 
+@pytest.mark.slow
 def test_truncated_recording_counts_and_still_writes(recording, tmp_path):
     cut = tmp_path / "cut.rdrlog"
     data = recording.read_bytes()
@@ -243,6 +250,7 @@ def _start_slow_decode(tmp_path, fmt, first: bytes):
     return p, out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("fmt", ["parquet", "csv"])
 def test_interrupted_decode_leaves_no_output_and_keeps_the_old_file(recording, tmp_path,
@@ -264,6 +272,7 @@ def test_interrupted_decode_leaves_no_output_and_keeps_the_old_file(recording, t
     assert out.read_bytes() == b"previous complete file"
 
 
+@pytest.mark.slow
 def test_killed_decode_leaves_only_a_hidden_part_file(recording, tmp_path):
     with RecordingReader(recording) as rd:
         payload = b"".join(c.data for c in rd)
@@ -278,6 +287,7 @@ def test_killed_decode_leaves_only_a_hidden_part_file(recording, tmp_path):
     assert left and all(n.startswith(".live.parquet.") and n.endswith(".part") for n in left)
 
 
+@pytest.mark.slow
 def test_binary_formats_to_stdout_refused_in_one_line(recording):
     r = run_cli("decode", str(recording), "--format", "parquet", "-q")
     assert r.returncode == 2
@@ -286,6 +296,7 @@ def test_binary_formats_to_stdout_refused_in_one_line(recording):
     assert r.stdout == b""
 
 
+@pytest.mark.slow
 def test_metadata_names_site_and_calibration(recording, tmp_path):
     cal = tmp_path / "cal.json"
     cal.write_text(json.dumps({"format": "radar_io-calibration/1", "id": "flight-7",
@@ -304,6 +315,7 @@ def test_metadata_names_site_and_calibration(recording, tmp_path):
     assert os.path.getsize(out) > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["csv", "jsonl"])
 def test_stdout_reader_gone_stops_quietly(recording, fmt):
     p = subprocess.Popen([sys.executable, "-m", "radar_io.cli", "decode", str(recording),
@@ -337,7 +349,7 @@ def test_measurement_batch_to_arrow_matches_the_columns():
     rb = batch.to_arrow({"source": "sim"})
     assert isinstance(rb, pa.RecordBatch) and rb.num_rows == len(batch) == 3000
     assert tuple(rb.schema.names) == tuple(batch.keys())
-    for name in batch.keys():
+    for name in batch:
         col = np.asarray(batch[name])
         got = rb.column(name).to_numpy(zero_copy_only=False)
         if col.dtype.kind == "f":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from radar_io.decoding.decoders import decode_bytes
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
@@ -28,7 +29,7 @@ def test_compensated_track_recovers_the_truth():
 
 def test_events_sync_go_and_ng():
     sim = RadarSimulator(config=SimConfig(seed=9, sync_every_s=2.0, go_delay_s=1.0, ng_per_min=30))
-    data, truth = sim.generate(10000)  # 10 s
+    data, _truth = sim.generate(10000)  # 10 s
     b = decode_bytes(data)
     edges = np.flatnonzero(np.diff(b["sync"].astype(int)) == 1) + 1
     assert np.array_equal(b["tod_s"][edges] - b["tod_s"][0], np.array([2.0, 4.0, 6.0, 8.0])) or \
@@ -50,6 +51,7 @@ def test_corruption_is_applied_and_counted():
     assert st["crc_errors"] > 0 and 15000 < st["frames"] < 20000
 
 
+@pytest.mark.slow
 def test_sim_source_paces_in_real_time():
     import time
 

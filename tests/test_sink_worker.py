@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 
 from radar_io.errors import UplinkError, ValidationError
 from radar_io.sinks.base import Sink
@@ -82,6 +83,7 @@ class RefusingLink(ListSink):
         raise UplinkError("write: connection refused")
 
 
+@pytest.mark.slow
 def test_the_back_off_grows_while_writes_keep_failing():
     sink = RefusingLink({})
     w = SinkWorker("t", sink)

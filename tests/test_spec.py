@@ -6,12 +6,12 @@ import os
 import re
 from pathlib import Path
 
+import independent
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import independent
 from radar_io.decoding.decoders import FrameDecoder, decode_bytes
 from radar_io.encoding.rdr1 import FrameEncoder
 from radar_io.errors import SpecError
@@ -108,9 +108,11 @@ def test_bad_spec_files_give_a_clear_error(tmp_path, sub, message):
     # wrong type of a required and of an optional key
     ((r"length_bytes = 24", 'length_bytes = "24"'), r"\[frame\]: key 'length_bytes' has the wrong type"),
     ((r'(name = "dsr".*?bits = )12', r'\g<1>"12"'), r"field 'dsr': key 'bits' has the wrong type"),
-    ((r'(name = "tod".*?max_raw = )863_999_999', r"\g<1>8.6e8"), r"field 'tod': key 'max_raw' has the wrong type"),
+    ((r'(name = "tod".*?max_raw = )863_999_999', r"\g<1>8.6e8"),
+     r"field 'tod': key 'max_raw' has the wrong type"),
     ((r'(name = "az".*?unit = )"deg"', r"\g<1>1"), r"field 'az': key 'unit' has the wrong type"),
-    ((r'(name = "servo_bw"\nbit = 2.*?width = )2', r"\g<1>true"), r"flag 'servo_bw': key 'width' has the wrong type"),
+    ((r'(name = "servo_bw"\nbit = 2.*?width = )2', r"\g<1>true"),
+     r"flag 'servo_bw': key 'width' has the wrong type"),
     ((r"reflect_in = false", "reflect_in = 0"), r"\[crc\]: key 'reflect_in' has the wrong type"),
     # missing field / key
     ((r'(name = "daz"\noffset = 18\n)size = 2\n', r"\g<1>"), r"field 'daz': missing key 'size'"),
@@ -157,9 +159,10 @@ _JUNK = ["0", "-1", "1e999", "true", '"x"', '""', "[]", "[1, 2]", "{}", "0xFFFFF
          '"1/0"', '"2**2**2**2**2"', "65536", "-0.0", '"big"', '"little"']
 
 
+@pytest.mark.slow
 @settings(max_examples=int(os.environ.get("RADAR_IO_FUZZ_EXAMPLES", "300")), deadline=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.tuples(st.sampled_from(_VALUE_LINES), st.sampled_from(_JUNK + ["<drop>"])),
+@given(st.lists(st.tuples(st.sampled_from(_VALUE_LINES), st.sampled_from([*_JUNK, "<drop>"])),
                 min_size=1, max_size=3))
 def test_mutated_spec_files_load_or_give_one_line(tmp_path, edits):
     """Any value swapped for junk, or any line dropped: a spec, or one SpecError line naming the file."""

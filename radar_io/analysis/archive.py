@@ -70,7 +70,7 @@ def _recording_info(path: Path) -> tuple[str | None, str]:
 
 
 def _date(t_s: float) -> str:
-    return _dt.datetime.fromtimestamp(t_s, _dt.timezone.utc).strftime("%Y-%m-%d")
+    return _dt.datetime.fromtimestamp(t_s, _dt.UTC).strftime("%Y-%m-%d")
 
 
 def partition_path(out_dir: str | os.PathLike[str], site: str, date: str, recording: str) -> Path:

@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.decoding.airdata import AircraftLog, load_dbc, read_can_log
+from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.errors import AirborneError
 from radar_io.simulation.aircraft import FT_M, expected_pa_minus_h
 

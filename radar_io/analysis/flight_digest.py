@@ -72,7 +72,7 @@ class FlightDigest:
             "bytes_discarded": int(self.stats.get("bytes_discarded", 0)),
             "go_time_s": float(go.sum() * self.frame_period_s),
             "rx_good_fraction": float(good.mean()) if n else 0.0,
-            "sync_events": int(len(self.sync_events())),
+            "sync_events": len(self.sync_events()),
         }
 
     def sync_events(self) -> list[dict[str, Any]]:
@@ -164,7 +164,8 @@ def digest_recording(path: str | os.PathLike[str], *, site: Site | None = None,
 
         events = [e for e in read_events(side) if e.get("type") == "alarm"]
     return FlightDigest(alarm_events=events, source=str(path), columns=cols, stats=dict(stats),
-                        counter_t_s=cols["t_s"][np.asarray(c_row, dtype=np.int64)], counter_crc=np.asarray(c_crc),
+                        counter_t_s=cols["t_s"][np.asarray(c_row, dtype=np.int64)],
+                        counter_crc=np.asarray(c_crc),
                         counter_gaps=np.asarray(c_gap), frame_period_s=period, header=header,
                         problems=list(report.problems), path=ref_path, site=site)
 

@@ -9,9 +9,15 @@ Angles are degrees at this API (radians only in the maths primitives of
 from __future__ import annotations
 
 from radar_io.calibration.bias import bias_calibration, bias_statistics, photo_to_radar, wrap_deg
-from radar_io.calibration.camera import AxisCalibration, apply_distortion, calibrate_axis, fit_distortion, focal_lengths, scan_delta_theta
+from radar_io.calibration.camera import (
+    AxisCalibration,
+    apply_distortion,
+    calibrate_axis,
+    fit_distortion,
+    focal_lengths,
+    scan_delta_theta,
+)
 from radar_io.calibration.digitizer import GridTransfer, digitised_to_film, film_from_grid
-from radar_io.errors import CalibrationError, CalibrationInputError
 from radar_io.calibration.mapgrid import (
     LocalConversion,
     QuadraticModel,
@@ -24,6 +30,7 @@ from radar_io.calibration.montecarlo import MonteCarloResult, monte_carlo
 from radar_io.calibration.refraction import correct_refraction, refraction_delta, refraction_displacement_mm
 from radar_io.calibration.resection import Pose, ResectionResult, project, resect, residual_partials
 from radar_io.calibration.rotation import angles_from_matrix, rotation_matrix, rotation_partials
+from radar_io.errors import CalibrationError, CalibrationInputError
 
 __all__ = [
     "AxisCalibration",

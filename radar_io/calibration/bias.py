@@ -18,7 +18,9 @@ from radar_io.errors import CalibrationError
 KEYS = ("dsr_m", "del_deg", "daz_deg")
 
 
-def photo_to_radar(x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def photo_to_radar(
+    x_m: np.ndarray, y_m: np.ndarray, z_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """SR (m), EL (deg), AZ (deg, [0, 360)) of photo positions (X north, Y east, Z down; H = −Z)."""
     x, y, h = np.asarray(x_m, float), np.asarray(y_m, float), -np.asarray(z_m, float)
     sr = np.sqrt(x**2 + y**2 + h**2)
@@ -40,8 +42,8 @@ def _stat(d: np.ndarray) -> dict[str, float]:
 
 def bias_statistics(
     groups: Sequence[str],
-    photo: tuple[np.ndarray, np.ndarray, np.ndarray],
-    radar: tuple[np.ndarray, np.ndarray, np.ndarray],
+    photo: Sequence[np.ndarray],
+    radar: Sequence[np.ndarray],
 ) -> dict[str, Any]:
     """Per-group and combined ΔSR, ΔEL, ΔAZ (photo − radar; m, deg, deg).
 
@@ -49,6 +51,8 @@ def bias_statistics(
     population std; combined: N = total, mean of the group means and mean of
     the group stds (the source's definition).  Groups keep first-seen order.
     """
+    if len(photo) != 3 or len(radar) != 3:
+        raise CalibrationError("bias: photo and radar must each be three arrays (SR, EL, AZ)")
     g = np.asarray(list(groups), dtype=object)
     p = [np.asarray(v, dtype=float) for v in photo]
     r = [np.asarray(v, dtype=float) for v in radar]
@@ -63,11 +67,12 @@ def bias_statistics(
     out: dict[str, Any] = {"groups": {}}
     for name in dict.fromkeys(g.tolist()):
         d = diffs[g == name]
-        out["groups"][str(name)] = {"n": int(len(d)), **{k: _stat(d[:, i]) for i, k in enumerate(KEYS)}}
+        out["groups"][str(name)] = {"n": len(d), **{k: _stat(d[:, i]) for i, k in enumerate(KEYS)}}
     stats = list(out["groups"].values())
     out["combined"] = {
         "n": n,
-        **{k: {"mean": float(np.mean([s[k]["mean"] for s in stats])), "std": float(np.mean([s[k]["std"] for s in stats]))} for k in KEYS},
+        **{k: {"mean": float(np.mean([s[k]["mean"] for s in stats])),
+               "std": float(np.mean([s[k]["std"] for s in stats]))} for k in KEYS},
     }
     return out
 

@@ -43,9 +43,11 @@ def _relative_angles(theta_deg: np.ndarray, film_mm: np.ndarray) -> tuple[np.nda
     theta = np.asarray(theta_deg, dtype=float)
     film = np.asarray(film_mm, dtype=float)
     if theta.ndim != 1 or theta.shape != film.shape:
-        raise CalibrationError("camera calibration: angles and film coordinates must be 1-D arrays of equal length")
+        raise CalibrationError(
+            "camera calibration: angles and film coordinates must be 1-D arrays of equal length")
     if len(theta) < 4:
-        raise CalibrationError(f"camera calibration needs at least 4 targets per axis (E_0 … E_3), got {len(theta)}")
+        raise CalibrationError(
+            f"camera calibration needs at least 4 targets per axis (E_0 … E_3), got {len(theta)}")
     if not (np.all(np.isfinite(theta)) and np.all(np.isfinite(film))):
         raise CalibrationError("camera calibration: non-finite angle or film coordinate")
     rel = np.radians(theta - theta[0])
@@ -54,7 +56,9 @@ def _relative_angles(theta_deg: np.ndarray, film_mm: np.ndarray) -> tuple[np.nda
     return rel, film
 
 
-def focal_lengths(theta_deg: np.ndarray, film_mm: np.ndarray, delta_theta_deg: np.ndarray | float) -> np.ndarray:
+def focal_lengths(
+    theta_deg: np.ndarray, film_mm: np.ndarray, delta_theta_deg: np.ndarray | float
+) -> np.ndarray:
     """F_i = (P'_i − P'_0)/(tan(θ_i − Δθ) + tan Δθ) for i ≥ 1 (3-19); shape (..., n) for Δθ of shape (...)."""
     rel, film = _relative_angles(theta_deg, film_mm)
     dt = np.radians(np.asarray(delta_theta_deg, dtype=float))[..., None]
@@ -69,7 +73,7 @@ def scan_delta_theta(
 
     Returns (Δθ, F_i at Δθ).  Raises if the minimum lies on the edge of the scan range.
     """
-    k = int(round(range_deg / step_deg))
+    k = round(range_deg / step_deg)
     if k < 1:
         raise CalibrationError("camera calibration: the scan range must cover at least one step")
     grid = np.arange(-k, k + 1) * step_deg
@@ -77,8 +81,8 @@ def scan_delta_theta(
     best = int(np.argmin(np.std(f, axis=1)))
     if best in (0, len(grid) - 1):
         raise CalibrationError(
-            f"camera calibration: the std of F_i is smallest at the edge of the Δθ scan (±{range_deg:g} deg); "
-            "widen the range or check the target angles"
+            "camera calibration: the std of F_i is smallest at the edge of the Δθ scan "
+            f"(±{range_deg:g} deg); widen the range or check the target angles"
         )
     return round(float(grid[best]), 10), f[best]
 
@@ -120,7 +124,8 @@ def calibrate_axis(
     dtheta, f_i = scan_delta_theta(theta_deg, film_mm, range_deg=range_deg, step_deg=step_deg)
     focal = float(np.mean(f_i))
     if not focal > 0:
-        raise CalibrationError("camera calibration: the fitted focal length is not positive (check angle signs)")
+        raise CalibrationError(
+            "camera calibration: the fitted focal length is not positive (check angle signs)")
     f_nom = focal if focal_nominal_mm is None else float(focal_nominal_mm)
     tan_dt = math.tan(math.radians(dtheta))
     ideal = f_nom * np.tan(rel - math.radians(dtheta))

@@ -41,7 +41,8 @@ class GridTransfer:
         d = np.asarray(digitised, dtype=float)
         if g.ndim != 3 or g.shape[2] != 2 or g.shape[0] < 2 or g.shape[1] < 2 or d.shape != g.shape:
             raise CalibrationError(
-                f"reference grid and digitised grid must both be (R ≥ 2, C ≥ 2, 2) arrays, got {g.shape} and {d.shape}"
+                "reference grid and digitised grid must both be (R ≥ 2, C ≥ 2, 2) arrays, "
+                f"got {g.shape} and {d.shape}"
             )
         if not (np.all(np.isfinite(g)) and np.all(np.isfinite(d))):
             raise CalibrationError("reference grid contains non-finite values")

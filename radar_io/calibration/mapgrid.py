@@ -57,6 +57,8 @@ def _transformers(crs_text: str):
     if not crs.is_projected:
         raise CalibrationError(f"{crs_text!r} ({crs.name}) is not a projected (map grid) CRS")
     geog = crs.geodetic_crs
+    if geog is None or geog.datum is None:
+        raise CalibrationError(f"{crs_text!r} ({crs.name}) names no geodetic datum")
     to_geog = pyproj.Transformer.from_crs(crs, geog, always_xy=True)
     geocentric = GeocentricCRS(name=f"{geog.datum.name} geocentric", datum=geog.datum)
     to_ecef = pyproj.Transformer.from_crs(geog.to_3d(), geocentric, always_xy=True)

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radar_io.errors import CalibrationError
 from radar_io.calibration.resection import PARAM_KEYS, ResectionResult, resect
+from radar_io.errors import CalibrationError
 
 
 @dataclass(frozen=True)
@@ -48,7 +48,7 @@ def monte_carlo(
     if runs < 2:
         raise CalibrationError(f"Monte Carlo needs at least 2 runs, got {runs}")
     if seed is None:  # a fresh seed, kept below 2**32 so that it survives any JSON reader
-        seed = int(np.random.SeedSequence().entropy % (2**32))
+        seed = int(np.random.SeedSequence().generate_state(1, np.uint32)[0])
     if seed < 0:
         raise CalibrationError(f"Monte Carlo seed must be ≥ 0, got {seed}")
     if sigma_mm is None:
@@ -64,7 +64,8 @@ def monte_carlo(
     for m in range(runs):
         film = fitted + np.array([sx, sy]) * rng.standard_normal(fitted.shape)
         try:
-            r = resect(points_m, film, focal_mm, start=solution.pose, weights=weights, max_iterations=max_iterations)
+            r = resect(points_m, film, focal_mm, start=solution.pose, weights=weights,
+                       max_iterations=max_iterations)
         except CalibrationError as exc:
             raise CalibrationError(f"Monte Carlo run {m + 1} of {runs} failed: {exc}") from exc
         samples[m] = [getattr(r.pose, k) for k in PARAM_KEYS]
@@ -72,7 +73,7 @@ def monte_carlo(
     samples[:, 3:] = ref[3:] + (180.0 - np.mod(180.0 - (samples[:, 3:] - ref[3:]), 360.0))
     std = np.std(samples, axis=0)
     return MonteCarloResult(
-        std={k: float(v) for k, v in zip(PARAM_KEYS, std)},
+        std={k: float(v) for k, v in zip(PARAM_KEYS, std, strict=True)},
         samples=samples,
         sigma_mm=(sx, sy),
         runs=runs,

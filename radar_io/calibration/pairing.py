@@ -42,8 +42,8 @@ def pair_observations(observations: Sequence[Mapping[str, Any]],
                                   "the recording")
         if not ev["rx_good"]:
             raise ValidationError(f"observation {k}: the radar was NG at sync event {idx} of {rec}")
-        xyz = [ob.get(c) for c in ("photo_x_m", "photo_y_m", "photo_z_m")]
-        sea = [ob.get(c) for c in ("photo_sr_m", "photo_el_deg", "photo_az_deg")]
+        xyz: list[Any] = [ob.get(c) for c in ("photo_x_m", "photo_y_m", "photo_z_m")]
+        sea: list[Any] = [ob.get(c) for c in ("photo_sr_m", "photo_el_deg", "photo_az_deg")]
         if None not in xyz:
             sr, el, az = (float(v[0]) for v in photo_to_radar(*(np.array([v]) for v in xyz)))
         elif None not in sea:

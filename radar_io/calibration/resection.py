@@ -24,12 +24,13 @@ the first that converges is returned):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from radar_io.errors import CalibrationError
 from radar_io.calibration.rotation import angles_from_matrix, rotation_matrix, rotation_partials, wrap_pi
+from radar_io.errors import CalibrationError
 
 PARAM_KEYS = ("x0_m", "y0_m", "z0_m", "phi_deg", "theta_deg", "psi_deg")
 _TO_API = np.array([1.0, 1.0, 1.0, 180.0 / math.pi, 180.0 / math.pi, 180.0 / math.pi])
@@ -48,7 +49,7 @@ class Pose:
     psi_deg: float
 
     @classmethod
-    def from_vector(cls, c: np.ndarray) -> "Pose":
+    def from_vector(cls, c: np.ndarray) -> Pose:
         """From the internal unknown vector (X_0, Y_0, Z_0 in m; φ, θ, ψ in rad)."""
         return cls(*(float(v) for v in np.asarray(c, dtype=float) * _TO_API))
 
@@ -84,7 +85,7 @@ class ResectionResult:
     def sigma(self) -> dict[str, float]:
         """1σ of each unknown from the covariance (m and deg)."""
         sd = np.sqrt(np.diag(self.covariance))
-        return {k: float(v) for k, v in zip(PARAM_KEYS, sd)}
+        return {k: float(v) for k, v in zip(PARAM_KEYS, sd, strict=True)}
 
 
 # ----------------------------------------------------------------- maths primitives
@@ -120,7 +121,10 @@ def residual_partials(points_m: np.ndarray, c: np.ndarray, focal_mm: float) -> n
 
 
 def project(points_m: np.ndarray, pose: Pose, focal_mm: float) -> np.ndarray:
-    """Film coordinates (N, 2) mm of ground points (N, 3) m seen from ``pose``; raises if any is behind the camera."""
+    """Film coordinates (N, 2) mm of ground points (N, 3) m seen from ``pose``.
+
+    Raises if any point is behind the camera.
+    """
     pts = _as_array(points_m, 3, "control points")
     film, cam = collinearity(pts, pose.to_vector(), float(focal_mm))
     _check_in_front(cam, "at the given pose")
@@ -233,7 +237,8 @@ def _gauss_newton(
     if not converged:
         raise CalibrationError(
             f"resection did not converge in {max_iterations} iterations (last step "
-            f"{float(np.max(np.abs(step[:3]))):.3g} m, {math.degrees(float(np.max(np.abs(step[3:])))):.3g} deg)"
+            f"{float(np.max(np.abs(step[:3]))):.3g} m, "
+            f"{math.degrees(float(np.max(np.abs(step[3:])))):.3g} deg)"
         )
     _check_in_front(cam, "at the solution")
     c[3] = wrap_pi(c[3])
@@ -315,13 +320,13 @@ def start_candidates(points_m: np.ndarray, film_mm: np.ndarray, focal_mm: float)
     film = np.asarray(film_mm, dtype=float)
     uv = film / focal_mm
     s = np.linalg.svd(pts - pts.mean(axis=0), compute_uv=False)
-    makers = []
+    makers: list[Callable[[np.ndarray, np.ndarray], np.ndarray | None]] = []
     if len(pts) >= 6 and s[2] > 0.05 * s[0]:
         makers.append(_dlt_start)
     if len(pts) >= 4:
         makers.append(_homography_start)
     makers.append(_level_start)
-    scored = []
+    scored: list[tuple[float, int, np.ndarray]] = []
     for make in makers:
         try:
             c = make(pts, uv)

@@ -35,7 +35,8 @@ class Table:
         missing = [n for n in names if n not in self.columns]
         if missing:
             raise CalibrationInputError(
-                f"{self.path}: missing column(s) {', '.join(missing)} (found: {', '.join(self.columns) or 'none'})"
+                f"{self.path}: missing column(s) {', '.join(missing)} "
+                f"(found: {', '.join(self.columns) or 'none'})"
             )
 
     def strings(self, name: str) -> list[str]:
@@ -48,7 +49,7 @@ class Table:
         self.require(name)
         i = self.columns.index(name)
         out = np.empty(len(self.rows))
-        for k, (row, line) in enumerate(zip(self.rows, self.lines)):
+        for k, (row, line) in enumerate(zip(self.rows, self.lines, strict=True)):
             try:
                 v = float(row[i])
             except ValueError:
@@ -84,7 +85,8 @@ def read_table(path: str | os.PathLike[str], *, min_rows: int = 1) -> Table:
                 columns = tuple(fields)
                 dup = {c for c in columns if columns.count(c) > 1}
                 if dup:
-                    raise CalibrationInputError(f"{p}, line {reader.line_num}: duplicate column(s) {', '.join(sorted(dup))}")
+                    raise CalibrationInputError(
+                        f"{p}, line {reader.line_num}: duplicate column(s) {', '.join(sorted(dup))}")
                 continue
             if len(fields) != len(columns):
                 raise CalibrationInputError(

@@ -38,8 +38,8 @@ def cmd_can_log(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace, tx: Any, rec: Any) -> None:
     """Put a simulated flight's recorder traffic on the bus (as fast as it is recorded)."""
-    from radar_io.simulation.radar import FlightScript, SimConfig
     from radar_io.simulation.aircraft import AircraftConfig, AircraftSimulator
+    from radar_io.simulation.radar import FlightScript, SimConfig
 
     script = FlightScript(**{k: getattr(args, k) for k in FlightScript.__dataclass_fields__
                              if getattr(args, k) is not None})

@@ -71,10 +71,13 @@ def _cmd_resection(args: argparse.Namespace) -> int:
         weights = np.column_stack([table.floats("wx"), table.floats("wy")])
     if args.refraction:
         if args.aircraft_height_m is None:
-            raise CalibrationInputError("--refraction needs --aircraft-height-m (aircraft height above sea level)")
-        film = correct_refraction(film, args.focal_mm, args.aircraft_height_m, args.site_height_m - points[:, 2])
+            raise CalibrationInputError(
+                "--refraction needs --aircraft-height-m (aircraft height above sea level)")
+        film = correct_refraction(film, args.focal_mm, args.aircraft_height_m,
+                                  args.site_height_m - points[:, 2])
     start = Pose(*args.start) if args.start is not None else None
-    result = resect(points, film, args.focal_mm, start=start, weights=weights, max_iterations=args.max_iterations)
+    result = resect(points, film, args.focal_mm, start=start, weights=weights,
+                    max_iterations=args.max_iterations)
     doc: dict[str, Any] = {
         **result.pose.to_dict(),
         "iterations": result.iterations,
@@ -86,7 +89,8 @@ def _cmd_resection(args: argparse.Namespace) -> int:
     if args.refraction:
         doc["refraction"] = {"aircraft_height_m": args.aircraft_height_m, "site_height_m": args.site_height_m}
     if args.monte_carlo is not None:
-        mc = monte_carlo(points, args.focal_mm, result, runs=args.monte_carlo, seed=args.seed, weights=weights)
+        mc = monte_carlo(points, args.focal_mm, result, runs=args.monte_carlo, seed=args.seed,
+                         weights=weights)
         doc["monte_carlo"] = mc.std
         doc["monte_carlo_info"] = {
             "runs": mc.runs,
@@ -98,9 +102,9 @@ def _cmd_resection(args: argparse.Namespace) -> int:
 
 
 def _cmd_bias(args: argparse.Namespace) -> int:
-    from radar_io.decoding.biases import save_calibration
     from radar_io.calibration.bias import bias_calibration, bias_statistics, photo_to_radar
     from radar_io.calibration.tables import read_table
+    from radar_io.decoding.biases import save_calibration
 
     table = read_table(args.pairs, min_rows=1)
     table.require("group", "radar_sr_m", "radar_el_deg", "radar_az_deg")
@@ -109,7 +113,8 @@ def _cmd_bias(args: argparse.Namespace) -> int:
     has_xyz, has_sea = any(table.has(c) for c in xyz), any(table.has(c) for c in sea)
     if has_xyz == has_sea:
         raise CalibrationInputError(
-            f"{table.path}: give either photo_x_m,photo_y_m,photo_z_m or photo_sr_m,photo_el_deg,photo_az_deg"
+            f"{table.path}: give either photo_x_m,photo_y_m,photo_z_m or "
+            "photo_sr_m,photo_el_deg,photo_az_deg"
             + (" (not both)" if has_xyz else "")
         )
     cols = xyz if has_xyz else sea
@@ -119,7 +124,7 @@ def _cmd_bias(args: argparse.Namespace) -> int:
         photo = photo_to_radar(*photo)
     radar = tuple(table.floats(c) for c in ("radar_sr_m", "radar_el_deg", "radar_az_deg"))
     groups = table.strings("group")
-    for name, line in zip(groups, table.lines):
+    for name, line in zip(groups, table.lines, strict=True):
         if not name:
             raise CalibrationInputError(f"{table.path}, line {line}, column group: empty group name")
     stats = bias_statistics(groups, photo, radar)
@@ -140,7 +145,8 @@ def _cmd_bias(args: argparse.Namespace) -> int:
         try:
             save_calibration(cal, args.output)
         except OSError as exc:
-            raise CalibrationInputError(f"cannot write calibration set {args.output}: {exc.strerror or exc}") from exc
+            raise CalibrationInputError(
+                f"cannot write calibration set {args.output}: {exc.strerror or exc}") from exc
     return _emit(stats)
 
 
@@ -154,17 +160,20 @@ def _cmd_camera(args: argparse.Namespace) -> int:
     table.require("axis", "theta_deg", "film_mm")
     theta, film = table.floats("theta_deg"), table.floats("film_mm")
     axes = [a.lower() for a in table.strings("axis")]
-    for a, line in zip(axes, table.lines):
+    for a, line in zip(axes, table.lines, strict=True):
         if a not in ("x", "y"):
             raise CalibrationInputError(f"{table.path}, line {line}, column axis: expected x or y, got {a!r}")
     names = [a for a in ("x", "y") if a in axes]
     sel = {a: np.array([b == a for b in axes]) for a in names}
     for a in names:
         if sel[a].sum() < 4:
-            raise CalibrationInputError(f"{table.path}: axis {a} needs at least 4 targets (E_0 … E_3), got {sel[a].sum()}")
+            raise CalibrationInputError(
+                f"{table.path}: axis {a} needs at least 4 targets (E_0 … E_3), got {sel[a].sum()}")
     f_nom = args.focal_mm
     if f_nom is None:
-        f_nom = float(np.mean([np.mean(scan_delta_theta(theta[sel[a]], film[sel[a]], range_deg=args.scan_range_deg)[1]) for a in names]))
+        f_nom = float(np.mean([
+            np.mean(scan_delta_theta(theta[sel[a]], film[sel[a]], range_deg=args.scan_range_deg)[1])
+            for a in names]))
     out: dict[str, Any] = {"focal_nominal_mm": f_nom, "axes": {}}
     for a in names:
         c = calibrate_axis(theta[sel[a]], film[sel[a]], focal_nominal_mm=f_nom, range_deg=args.scan_range_deg)
@@ -175,7 +184,7 @@ def _cmd_camera(args: argparse.Namespace) -> int:
             "focal_std_mm": c.focal_std_mm,
             "focal_per_point_mm": c.focal_per_point_mm,
             "principal_point_mm": c.principal_point_mm,
-            "distortion": dict(zip(("a0", "a1", "a2", "a3"), c.distortion.tolist())),
+            "distortion": dict(zip(("a0", "a1", "a2", "a3"), c.distortion.tolist(), strict=True)),
             "distortion_rms_mm": float(np.sqrt(np.mean(c.distortion_residuals_mm**2))),
             "ideal_mm": c.ideal_mm,
         }
@@ -185,9 +194,9 @@ def _cmd_camera(args: argparse.Namespace) -> int:
 def _cmd_mapgrid(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from radar_io.errors import CalibrationError
     from radar_io.calibration.mapgrid import fit_quadratic_model, japan_zone_crs, map_to_local
     from radar_io.calibration.tables import read_table
+    from radar_io.errors import CalibrationError
 
     if (args.crs is None) == (args.zone is None):
         raise CalibrationInputError("give either --crs or --zone (with --datum)")
@@ -206,12 +215,12 @@ def _cmd_mapgrid(args: argparse.Namespace) -> int:
     doc: dict[str, Any] = {
         "crs": crs,
         "crs_name": conv.crs_name,
-        "site": dict(zip(("lat_deg", "lon_deg", "h_m"), conv.site_geodetic)),
+        "site": dict(zip(("lat_deg", "lon_deg", "h_m"), conv.site_geodetic, strict=True)),
         "points": [],
     }
     for i, name in enumerate(names):
         p = {"name": name, "x_m": conv.ned_m[i, 0], "y_m": conv.ned_m[i, 1], "z_m": conv.ned_m[i, 2]}
-        p.update(zip(("dx_m", "dy_m", "dh_m"), diff[i]))
+        p.update(zip(("dx_m", "dy_m", "dh_m"), diff[i], strict=True))
         if model is not None:
             p["model_residual_m"] = model.residuals_m[i]
         doc["points"].append(p)
@@ -258,7 +267,8 @@ def add_subparser(subparsers: Any) -> None:
     r.add_argument("--start", type=_floats(6, "X0,Y0,Z0,PHI,THETA,PSI"), metavar="X0,Y0,Z0,PHI,THETA,PSI",
                    help="starting pose (m, deg); default: derived from the points")
     r.add_argument("--refraction", action="store_true", help="apply the refraction correction (§5) first")
-    r.add_argument("--aircraft-height-m", type=_finite_float, help="aircraft height above sea level (m), for --refraction")
+    r.add_argument("--aircraft-height-m", type=_finite_float,
+                   help="aircraft height above sea level (m), for --refraction")
     r.add_argument("--site-height-m", type=_finite_float, default=0.0,
                    help="radar height above sea level (m); ground heights are this minus z_m (default 0)")
     r.add_argument("--max-iterations", type=_int_at_least(1), default=20)
@@ -269,23 +279,28 @@ def add_subparser(subparsers: Any) -> None:
     b = steps.add_parser(
         "bias",
         help="radar SR/EL/AZ biases from photo positions",
-        description="Radar bias (calibration.md §8). CSV columns group,radar_sr_m,radar_el_deg,radar_az_deg and "
-        "either photo_x_m,photo_y_m,photo_z_m (Z down) or photo_sr_m,photo_el_deg,photo_az_deg.",
+        description="Radar bias (calibration.md §8). CSV columns group,radar_sr_m,radar_el_deg,"
+        "radar_az_deg and either photo_x_m,photo_y_m,photo_z_m (Z down) or "
+        "photo_sr_m,photo_el_deg,photo_az_deg.",
     )
     b.add_argument("pairs", metavar="PAIRS.csv")
-    b.add_argument("-o", "--output", metavar="CAL.json", help="also write the calibration set (biases = combined means)")
+    b.add_argument("-o", "--output", metavar="CAL.json",
+                   help="also write the calibration set (biases = combined means)")
     b.add_argument("--id", help="calibration set id (default bias-<input stem>)")
     b.set_defaults(func=_cmd_bias)
 
     c = steps.add_parser(
         "camera",
         help="Δθ, focal length, principal point and distortion from targets",
-        description="Camera calibration (calibration.md §4). CSV columns axis (x or y), theta_deg (angle to the "
-        "target), film_mm (from the mechanical centre); the first row of each axis is E_0.",
+        description="Camera calibration (calibration.md §4). CSV columns axis (x or y), theta_deg "
+        "(angle to the target), film_mm (from the mechanical centre); the first row of each axis "
+        "is E_0.",
     )
     c.add_argument("targets", metavar="TARGETS.csv")
-    c.add_argument("--focal-mm", type=_positive_float, help="nominal focal length F_nom (default: mean fitted F)")
-    c.add_argument("--scan-range-deg", type=_positive_float, default=5.0, help="Δθ scanned over ±this (default 5)")
+    c.add_argument("--focal-mm", type=_positive_float,
+                   help="nominal focal length F_nom (default: mean fitted F)")
+    c.add_argument("--scan-range-deg", type=_positive_float, default=5.0,
+                   help="Δθ scanned over ±this (default 5)")
     c.set_defaults(func=_cmd_camera)
 
     m = steps.add_parser(
@@ -298,7 +313,8 @@ def add_subparser(subparsers: Any) -> None:
     m.add_argument("--site", type=_floats(3, "X,Y,H"), required=True, metavar="X,Y,H",
                    help="radar map coordinates: northing, easting, height (m)")
     m.add_argument("--crs", help="projected CRS, e.g. EPSG:30169 (Tokyo datum zone IX)")
-    m.add_argument("--zone", type=_int_at_least(1), help="Japan plane rectangular zone 1-19 (instead of --crs)")
+    m.add_argument("--zone", type=_int_at_least(1),
+                   help="Japan plane rectangular zone 1-19 (instead of --crs)")
     m.add_argument("--datum", choices=("tokyo", "jgd2000", "jgd2011"), default="jgd2011", help="with --zone")
     m.add_argument("--geoid-height-m", type=_finite_float, default=0.0,
                    help="geoid-ellipsoid separation added to all heights (m, default 0)")

@@ -15,8 +15,8 @@ class Parser(argparse.ArgumentParser):
 
 
 def load_common(args: argparse.Namespace) -> dict[str, Any]:
-    from radar_io.decoding.biases import load_calibration
     from radar_io.coordinates.transforms import load_site
+    from radar_io.decoding.biases import load_calibration
     from radar_io.wirespec.frame import load_spec
 
     return {
@@ -28,6 +28,7 @@ def load_common(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--site", metavar="SITE", help="site TOML file or packaged site name, e.g. demo (adds runway and geodetic columns)")
+    p.add_argument("--site", metavar="SITE", help="site TOML file or packaged site name, e.g. demo "
+                   "(adds runway and geodetic columns)")
     p.add_argument("--calibration", metavar="CAL", help="calibration set JSON (radar biases)")
     p.add_argument("--spec", metavar="SPEC", help="frame spec TOML (default firmware_specs/rdr1.toml)")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import sys
@@ -38,12 +39,14 @@ def add_subparser(sub: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from radar_io.decoding.batch_decoder import iter_decode
-    from radar_io.coordinates.reference_path import add_deviation
     from radar_io.cli.progress import Progress
-    from radar_io.sinks import open_sink, open_table
-    from radar_io.sinks.arrow_convert import output_metadata
+    from radar_io.coordinates.reference_path import add_deviation
+    from radar_io.decoding.batch_decoder import iter_decode
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
+    from radar_io.sinks import open_table
+    from radar_io.sinks.arrow_convert import output_metadata
+    from radar_io.sinks.asterix import AsterixFileWriter
+    from radar_io.sinks.table import TableWriter
 
     common = load_common(args)
     path, tlm, da = _guidance_outputs(args)  # bad options fail before any output is created
@@ -56,13 +59,17 @@ def run(args: argparse.Namespace) -> int:
     state: dict[str, Any] = {"frames": 0}
     if args.input == "-":
         stdin = sys.stdin.buffer
-        chunks = iter(lambda: stdin.read1(1 << 20), b"")
+        # read1: what has arrived (up to 1 MiB), so a live pipe is decoded as it comes
+        read = stdin.read1 if isinstance(stdin, io.BufferedReader) else stdin.read
+        chunks = iter(lambda: read(1 << 20), b"")
     else:
         chunks = iter_payloads(args.input, chunk_bytes=CHUNK_BYTES,
                                progress=lambda d, t: _progress(progress, d, t, state),
                                report=report)
+    writer: TableWriter | AsterixFileWriter
     if args.format == "ast" or (args.format is None and (args.output or "").lower().endswith(".ast")):
-        writer = open_sink("ast", args.output or "-", site=common["site"])
+        writer = AsterixFileWriter(args.output or "-", site=common["site"])
+        writer.open()
     else:
         writer = open_table(args.output or "-", args.format, metadata=meta)
     stats: dict[str, int] = {}

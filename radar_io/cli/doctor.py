@@ -140,8 +140,8 @@ def check_source(url: str, timeout_s: float = 3.0, spec: Any = None) -> Check:
         src.open()
     except RadarIOError as exc:
         dev = _device_of(url)
-        fix = (f"check the cable and the device name (ls /dev/ttyUSB* /dev/serial/by-id/); "
-               f"set source in the config" if dev else "check the source URL")
+        fix = ("check the cable and the device name (ls /dev/ttyUSB* /dev/serial/by-id/); "
+               "set source in the config" if dev else "check the source URL")
         return Check("FAIL", "source", f"cannot open {url}: {exc}", fix)
     framer = BatchFramer(spec)
     nbytes = 0

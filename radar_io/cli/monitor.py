@@ -9,6 +9,7 @@ from typing import Any
 
 from radar_io.cli.common import add_common, load_common
 
+
 def add_subparser(sub: Any) -> None:
     p = sub.add_parser("monitor", help="live table of a source in the terminal",
                        description="Read a source, decode frame by frame and show a live line.")

@@ -44,7 +44,8 @@ def add_subparser(subparsers: Any) -> None:
     p.add_argument("images", nargs="*", metavar="IMAGE", help="image file(s) to process")
     p.add_argument("--focal-px", type=float, required=True, metavar="F", help="focal length in pixels")
     p.add_argument(
-        "--half-width-m", type=float, required=True, metavar="D", help="runway half-width d in metres (width / 2)"
+        "--half-width-m", type=float, required=True, metavar="D",
+        help="runway half-width d in metres (width / 2)"
     )
     p.add_argument(
         "--principal-point", metavar="CX,CY", help="principal point in pixels (default: image centre)"
@@ -138,7 +139,8 @@ def _frames(source: str) -> tuple[Iterator[tuple[str, int, Any]], int | None]:
                     ok, frame = cap.read()
                     if not ok:
                         break
-                    yield f"{source}#{i}", i, cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+                    gray = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if frame.ndim == 3 else frame
+                    yield f"{source}#{i}", i, gray
                     i += 1
             finally:
                 cap.release()
@@ -149,7 +151,8 @@ def _frames(source: str) -> tuple[Iterator[tuple[str, int, Any]], int | None]:
     else:
         files = sorted(f for f in glob.glob(source) if Path(f).suffix.lower() in IMAGE_SUFFIXES)
         if not files:
-            raise VisionError(f"video source not found (no such file, directory or matching frames): {source}")
+            raise VisionError(
+                f"video source not found (no such file, directory or matching frames): {source}")
 
     def gen_files() -> Iterator[tuple[str, int, Any]]:
         for i, f in enumerate(files):
@@ -162,8 +165,10 @@ def _frames(source: str) -> tuple[Iterator[tuple[str, int, Any]], int | None]:
 def run(args: argparse.Namespace) -> int:
     """Entry point of ``radar-io runway``; returns the exit code."""
     _check_args(args)
-    pp = _floats(args.principal_point, 2, "--principal-point")
-    offset = _floats(args.camera_offset, 3, "--camera-offset")
+    pp_v = _floats(args.principal_point, 2, "--principal-point")
+    off_v = _floats(args.camera_offset, 3, "--camera-offset")
+    pp = None if pp_v is None else (pp_v[0], pp_v[1])
+    offset = None if off_v is None else (off_v[0], off_v[1], off_v[2])
 
     from radar_io.vision.chain import ChainParams, RunwayResult, RunwayTracker, find_runway
 
@@ -179,13 +184,15 @@ def run(args: argparse.Namespace) -> int:
             pp = pp or ((w - 1) / 2.0, (h - 1) / 2.0)
         elif pp is None:
             raise VisionError("--points without an IMAGE needs --principal-point")
-        res = pose_from_points(points, args.focal_px, args.half_width_m, pp, camera_offset_m=offset, params=params)
+        res = pose_from_points(points, args.focal_px, args.half_width_m, pp, camera_offset_m=offset,
+                               params=params)
         _emit({"image": args.images[0] if args.images else None, "points": args.points, **res.to_dict()})
         return 0
 
     if args.video:
         frames, total = _frames(args.video)
-        tracker = RunwayTracker(args.focal_px, args.half_width_m, pp, camera_offset_m=offset, params=params)
+        tracker = RunwayTracker(args.focal_px, args.half_width_m, pp, camera_offset_m=offset,
+                                params=params)
         from radar_io.cli.progress import Progress
 
         progress = Progress("runway", total=total or None, unit="frames", scale=1.0)
@@ -203,6 +210,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     for path in args.images:
-        res = find_runway(_read_image(path), args.focal_px, args.half_width_m, pp, camera_offset_m=offset, params=params)
+        res = find_runway(_read_image(path), args.focal_px, args.half_width_m, pp,
+                          camera_offset_m=offset, params=params)
         _emit({"image": path, **res.to_dict()})
     return 0

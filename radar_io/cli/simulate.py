@@ -10,6 +10,7 @@ from typing import Any
 from radar_io.cli.common import load_common
 from radar_io.errors import ConfigError
 
+
 def add_subparser(sub: Any) -> None:
     p = sub.add_parser("simulate", help="synthesise RDR1 frames for a scripted flight",
                        description="Synthesise RDR1 frames for a straight flight at constant "
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         close = rec.close
     else:
         try:
-            f = open(target, "wb")
+            f = open(target, "wb")  # noqa: SIM115 - closed by close() after the stream
         except OSError as exc:
             raise ConfigError(f"cannot write {target}: {exc.strerror}") from exc
         write, close = f.write, f.close

@@ -41,8 +41,8 @@ from typing import Any
 import numpy as np
 
 from radar_io.decoding.measurement import MeasurementBatch
-from radar_io.textfiles import Fields, read_toml
 from radar_io.errors import ConfigError
+from radar_io.textfiles import Fields, read_toml
 
 #: columns added by :func:`add_deviation`
 DEVIATION_COLUMNS = ("dy_m", "dz_m", "along_m", "leg")

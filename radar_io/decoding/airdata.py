@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.wirespec.frame import spec_dir
 from radar_io.errors import AirborneError
 from radar_io.textfiles import decode_text, one_line, read_text
+from radar_io.wirespec.frame import spec_dir
 
 #: message name → the signals radar_io relies on
 REQUIRED = {
@@ -43,7 +43,8 @@ SAMPLE_COLUMNS = {
 
 
 def load_dbc(path: str | os.PathLike[str] | None = None) -> Any:
-    """The cantools database of ``firmware_specs/airdata.dbc`` (or ``path``), checked for the signals used."""
+    """The cantools database of ``firmware_specs/airdata.dbc`` (or ``path``), checked for the
+    signals used."""
     import cantools
 
     p = Path(path) if path is not None else spec_dir() / "airdata.dbc"
@@ -51,8 +52,10 @@ def load_dbc(path: str | os.PathLike[str] | None = None) -> Any:
                        allow_empty=False)
     try:
         db = cantools.database.load_string(text, database_format="dbc")
-    except Exception as exc:  # noqa: BLE001 - cantools raises many parse error types
+    except Exception as exc:  # cantools raises many parse error types
         raise AirborneError(one_line(f"DBC file {p} cannot be parsed: {exc}")) from exc
+    if not isinstance(db, cantools.database.can.Database):
+        raise AirborneError(f"DBC file {p}: not a CAN database")
     for name, signals in REQUIRED.items():
         try:
             msg = db.get_message_by_name(name)
@@ -118,10 +121,11 @@ class AirDataDecoder:
                 del self.latest[next(iter(self.latest))]
             kind = "sample_start"
         else:
-            row = self.latest.get(count)
-            if row is None:      # its AIR_DATA_TIME was lost: the sample has no time
+            started = self.latest.get(count)
+            if started is None:  # its AIR_DATA_TIME was lost: the sample has no time
                 self.undecodable += 1
                 return None
+            row = started
         for s, col in SAMPLE_COLUMNS.items():
             if s in sig:
                 row[col] = float(sig[s])
@@ -163,5 +167,5 @@ def read_can_log(path: str | os.PathLike[str], db: Any = None) -> AircraftLog:
             return decode_messages(reader, db)
     except AirborneError:
         raise
-    except Exception as exc:  # noqa: BLE001 - python-can readers raise many types on bad files
+    except Exception as exc:  # python-can readers raise many types on bad files
         raise AirborneError(f"cannot read CAN log {p}: {exc}") from exc

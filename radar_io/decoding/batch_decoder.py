@@ -31,9 +31,9 @@ import numpy as np
 
 from radar_io.coordinates.transforms import Site, geodetic, runway_xyh
 from radar_io.decoding.biases import Calibration
-from radar_io.errors import ConfigError
 from radar_io.decoding.measurement import MeasurementBatch
 from radar_io.decoding.model import GEODETIC_COLUMNS, RUNWAY_COLUMNS, DecodeModel, value_table
+from radar_io.errors import ConfigError
 from radar_io.framing.core import BatchFramer, field_raw
 from radar_io.wirespec.frame import FieldSpec, FrameSpec, load_spec
 
@@ -193,9 +193,9 @@ class BatchDecoder:
         self._position(out, raws)
         if self.site is not None:
             sr, el, az = out["sr_c_m"], out["el_c_deg"], out["az_c_deg"]
-            for col, v in zip(RUNWAY_COLUMNS, runway_xyh(sr, el, az, self.site)):
+            for col, v in zip(RUNWAY_COLUMNS, runway_xyh(sr, el, az, self.site), strict=True):
                 out[col][:] = v
-            for col, v in zip(GEODETIC_COLUMNS, geodetic(sr, el, az, self.site)):
+            for col, v in zip(GEODETIC_COLUMNS, geodetic(sr, el, az, self.site), strict=True):
                 out[col][:] = v
 
     def _position(self, out: dict[str, np.ndarray], raws: dict[str, np.ndarray]) -> None:
@@ -208,7 +208,7 @@ class BatchDecoder:
                 # (v mod wrap) without np.mod: exact and equal to Python's % for -wrap <= v < 2 wrap
                 np.subtract(v, c.wrap, out=v, where=v >= c.wrap)
                 np.add(v, c.wrap, out=v, where=v < 0.0)
-                if v.size and not (0.0 <= v.min() and v.max() < c.wrap):
+                if v.size and not (v.min() >= 0.0 and v.max() < c.wrap):
                     np.mod(v, c.wrap, out=v)
         sr, el, az = out["sr_c_m"], out["el_c_deg"], out["az_c_deg"]
         np.copyto(sr, np.nan, where=ng)
@@ -234,7 +234,8 @@ class BatchDecoder:
         np.copyto(el, np.nan, where=ng)
         np.copyto(az, np.nan, where=ng)
 
-    def batch(self, w: np.ndarray | list[np.ndarray], stats: dict[str, int] | None = None) -> MeasurementBatch:
+    def batch(self, w: np.ndarray | list[np.ndarray],
+              stats: dict[str, int] | None = None) -> MeasurementBatch:
         return MeasurementBatch(self.decode(w), stats, self.columns)
 
 
@@ -271,8 +272,8 @@ def _chunks(source: Any, chunk_bytes: int) -> Iterator[bytes | memoryview]:
         with open(source, "rb") as f:
             yield from _chunks(f, chunk_bytes)
     elif hasattr(source, "read"):
-        f: IO[bytes] = source
-        while chunk := f.read(chunk_bytes):
+        reader: IO[bytes] = source
+        while chunk := reader.read(chunk_bytes):
             yield chunk
     else:
         yield from source

@@ -64,7 +64,7 @@ class Calibration:
         }
 
     @classmethod
-    def from_dict(cls, doc: Any, *, source: str = "calibration") -> "Calibration":
+    def from_dict(cls, doc: Any, *, source: str = "calibration") -> Calibration:
         """Validate and build a set from its JSON document; raises ConfigError naming the field."""
         f = Fields(doc, source, "calibration set")
         f.only(*TOP_KEYS)
@@ -106,4 +106,4 @@ def save_calibration(cal: Calibration, path: str | os.PathLike[str]) -> None:
 
 def utc_now_iso() -> str:
     """Current UTC time as ISO-8601 with a Z suffix (seconds resolution)."""
-    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+    return _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")

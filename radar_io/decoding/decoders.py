@@ -14,9 +14,15 @@ from __future__ import annotations
 from radar_io.decoding.batch_decoder import BLOCK_FRAMES, BatchDecoder, decode_bytes, iter_decode
 from radar_io.decoding.frame_decoder import FrameDecoder, construct_struct, frame_struct
 from radar_io.decoding.measurement import MeasurementBatch
-from radar_io.decoding.model import (COMPENSATIONS, DECODE_COLUMNS, GEODETIC_COLUMNS,
-                                     POSITION_COLUMNS, RUNWAY_COLUMNS, DecodeModel,
-                                     output_columns)
+from radar_io.decoding.model import (
+                                     COMPENSATIONS,
+                                     DECODE_COLUMNS,
+                                     GEODETIC_COLUMNS,
+                                     POSITION_COLUMNS,
+                                     RUNWAY_COLUMNS,
+                                     DecodeModel,
+                                     output_columns,
+)
 
 __all__ = ["BLOCK_FRAMES", "COMPENSATIONS", "DECODE_COLUMNS", "GEODETIC_COLUMNS",
            "POSITION_COLUMNS", "RUNWAY_COLUMNS", "BatchDecoder", "DecodeModel", "FrameDecoder",

@@ -2,10 +2,19 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
-from typing import Any
+from collections.abc import Iterable, Iterator, Mapping
+from typing import Any, Protocol
 
 import numpy as np
+
+
+class Columns(Protocol):
+    """Equal-length columns by name (units in the names), read-only: a dict of arrays or a
+    :class:`MeasurementBatch` (which is not a Mapping: its ``len`` counts rows)."""
+
+    def __getitem__(self, name: str, /) -> np.ndarray: ...
+    def __contains__(self, name: object, /) -> bool: ...
+    def keys(self) -> Iterable[str]: ...
 
 
 class MeasurementBatch:
@@ -26,6 +35,10 @@ class MeasurementBatch:
     def __contains__(self, name: object) -> bool:
         return name in self._cols
 
+    def __iter__(self) -> Iterator[str]:
+        """The column names in decode order (``len`` counts rows, as for a table)."""
+        return iter(self.columns)
+
     def __len__(self) -> int:
         return len(self._cols[self.columns[0]]) if self.columns else 0
 
@@ -44,8 +57,8 @@ class MeasurementBatch:
         return f"MeasurementBatch({len(self)} rows, stats={self.stats})"
 
     @classmethod
-    def concat(cls, batches: list["MeasurementBatch"], stats: dict[str, int] | None = None
-               ) -> "MeasurementBatch":
+    def concat(cls, batches: list[MeasurementBatch], stats: dict[str, int] | None = None
+               ) -> MeasurementBatch:
         if not batches:
             raise ValueError("no batches to concatenate")
         order = batches[0].columns

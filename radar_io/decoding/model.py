@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from radar_io.decoding.biases import Calibration
 from radar_io.coordinates.transforms import Site
+from radar_io.decoding.biases import Calibration
 from radar_io.errors import SpecError
 from radar_io.wirespec.frame import FieldSpec, FrameSpec, load_spec
 

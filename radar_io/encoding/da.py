@@ -10,15 +10,14 @@ is the inverse, for checks and playback.
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
-from radar_io.errors import SpecError
-from radar_io.errors import UplinkError
-from radar_io.wirespec.reading import keys, positive, read_toml, req, tables
+from radar_io.decoding.measurement import Columns
 from radar_io.encoding.tlm1 import COLUMN_HINTS
+from radar_io.errors import SpecError, UplinkError
+from radar_io.wirespec.reading import keys, positive, read_toml, req, tables
 
 PEN_UP_DATA = ("hold", "zero")
 #: sources the encoder derives from other columns when the batch lacks them:
@@ -26,7 +25,7 @@ PEN_UP_DATA = ("hold", "zero")
 DERIVED_SOURCES = {"z_m": ("h_m", -1.0)}
 
 
-def source_values(cols: Mapping[str, np.ndarray], source: str) -> np.ndarray | None:
+def source_values(cols: Columns, source: str) -> np.ndarray | None:
     """The column ``source`` from ``cols`` (derived ones such as ``z_m`` = -``h_m`` computed), or None."""
     if source in cols:
         return np.asarray(cols[source], dtype=np.float64)
@@ -143,15 +142,17 @@ class DAEncoder:
         self._range = (-half, half - 1)
         self._held = np.zeros(len(spec.channels), dtype=np.int64)
 
-    def words(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    def words(self, cols: Columns) -> np.ndarray:
         """(rows, channels) uint16 words for a batch; updates the counters and the held data."""
         spec = self.spec
-        src = {c.source: source_values(cols, c.source) for c in spec.channels}
+        src: dict[str, np.ndarray] = {}
         for c in spec.channels:
-            if src[c.source] is None:
+            values = source_values(cols, c.source)
+            if values is None:
                 hint = COLUMN_HINTS.get(c.source)
                 raise UplinkError(f"{spec.name} channel {c.number} ({c.name}) needs column "
                                   f"{c.source!r}" + (f" ({hint})" if hint else ""))
+            src[c.source] = values
         valid = (np.asarray(cols["rx_good"]) == 1) & (np.asarray(cols["go"]) == 1)
         n = valid.size
         out = np.empty((n, len(spec.channels)), dtype=np.uint16)
@@ -176,7 +177,7 @@ class DAEncoder:
         self.pen_up_samples += int(n - valid.sum())
         return out
 
-    def encode_batch(self, cols: Mapping[str, np.ndarray]) -> bytes:
+    def encode_batch(self, cols: Columns) -> bytes:
         """Big-endian u16 words for a MeasurementBatch (or a mapping of its columns)."""
         return self.words(cols).astype(">u2").tobytes()
 

@@ -12,9 +12,9 @@ TOD wrapping at midnight is handled.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
 import numpy as np
+
+from radar_io.decoding.measurement import Columns
 
 KINEMATIC_COLUMNS = ("ground_speed_mps", "track_deg")
 _DAY = 86400.0
@@ -36,7 +36,7 @@ class Kinematics:
         self._last_tod: float | None = None
         self._day = 0.0          # days added so far (TOD unwrapping)
 
-    def update(self, cols: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    def update(self, cols: Columns) -> dict[str, np.ndarray]:
         """``ground_speed_mps`` and ``track_deg`` for every row of a batch (NaN where unavailable)."""
         tod = np.asarray(cols["tod_s"], dtype=np.float64)
         x = np.asarray(cols["x_m"], dtype=np.float64)

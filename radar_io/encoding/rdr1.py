@@ -12,9 +12,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from radar_io.wirespec.crc import crc_function, word_table
 from radar_io.decoding.frame_decoder import construct_struct
 from radar_io.errors import EncodeError
+from radar_io.wirespec.crc import crc_function, word_table
 from radar_io.wirespec.frame import FieldSpec, FrameSpec, load_spec
 
 

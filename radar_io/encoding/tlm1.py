@@ -23,11 +23,11 @@ from typing import Any
 import construct as cs
 import numpy as np
 
-from radar_io.wirespec.crc import crc_function, word_table
-from radar_io.errors import SpecError
-from radar_io.wirespec.frame import CrcSpec
-from radar_io.errors import UplinkError
+from radar_io.decoding.measurement import Columns
 from radar_io.encoding.kinematics import KINEMATIC_COLUMNS, Kinematics
+from radar_io.errors import SpecError, UplinkError
+from radar_io.wirespec.crc import crc_function, word_table
+from radar_io.wirespec.frame import CrcSpec
 from radar_io.wirespec.reading import crc_spec, keys, positive, read_toml, req, tables
 
 SCALINGS = ("full_scale", "raw_bits", "zero")
@@ -91,7 +91,8 @@ def load_tlm_spec(path: str | os.PathLike[str] | None = None) -> TelemetrySpec:
     if not 1 <= full_count <= 32767:
         raise SpecError(f"{where}: full_scale_count must be 1 .. 32767")
     cycle = fr.get("cycle_s", 0.0)
-    if isinstance(cycle, bool) or not isinstance(cycle, (int, float)) or not (cycle >= 0 and math.isfinite(cycle)):
+    if (isinstance(cycle, bool) or not isinstance(cycle, (int, float))
+            or not (cycle >= 0 and math.isfinite(cycle))):
         raise SpecError(f"{where}: cycle_s must be a number >= 0")
     crc = crc_spec(doc, p)
     if crc.offset + 2 != length:
@@ -227,7 +228,7 @@ class TelemetryEncoder:
         self._struct = frame_struct(spec)
         self._crc = crc_function(spec.crc)
 
-    def _sources(self, cols: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    def _sources(self, cols: Columns) -> dict[str, np.ndarray]:
         kin = None
         if self._needs_kin and not all(k in cols for k in KINEMATIC_COLUMNS):
             kin = self.kinematics.update(cols)   # every batch, to keep the window current
@@ -245,7 +246,7 @@ class TelemetryEncoder:
                                   f"{c.source!r}" + (f" ({hint})" if hint else ""))
         return out
 
-    def select(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    def select(self, cols: Columns) -> np.ndarray:
         """Row indices that produce a frame: RX_GOOD = 1 and GO = 1 (and the first of each cycle)."""
         rows = np.flatnonzero((np.asarray(cols["rx_good"]) == 1) & (np.asarray(cols["go"]) == 1))
         if self.cycle_s > 0 and rows.size:
@@ -255,7 +256,7 @@ class TelemetryEncoder:
             self._last_cycle = float(cyc[-1])
         return rows
 
-    def batch_words(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    def batch_words(self, cols: Columns) -> np.ndarray:
         """(n_frames, channels) wire words for a batch; updates the counters."""
         src = self._sources(cols)
         rows = self.select(cols)
@@ -267,7 +268,7 @@ class TelemetryEncoder:
             self.unavailable[c.name] += int(bad.sum())
         return words
 
-    def encode_batch(self, cols: Mapping[str, np.ndarray]) -> bytes:
+    def encode_batch(self, cols: Columns) -> bytes:
         """Frame bytes for a MeasurementBatch (or a mapping of its columns), in row order."""
         words = self.batch_words(cols)
         n = words.shape[0]

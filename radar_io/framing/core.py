@@ -60,7 +60,7 @@ class FrameFormat:
         return self.sync_word.to_bytes(2, "big")
 
     @classmethod
-    def of(cls, spec: Any) -> "FrameFormat":
+    def of(cls, spec: Any) -> FrameFormat:
         """The format of an RDR1 ``FrameSpec``, a TLM1 ``TelemetrySpec`` or a ``FrameFormat``."""
         if isinstance(spec, FrameFormat):
             return spec
@@ -152,7 +152,7 @@ class Framer:
     def _plausible(self, v: int) -> bool:
         if v & self._unused:
             return False
-        for shift, mask, max_raw in self._limits:
+        for shift, mask, max_raw in self._limits:  # noqa: SIM110 - per frame: no generator
             if (v >> shift) & mask > max_raw:
                 return False
         return True
@@ -244,7 +244,7 @@ def field_raw(w: np.ndarray, offset: int, size: int) -> np.ndarray:
     if offset % 2 == 0 and size == 4:
         k = offset // 2
         return (w[:, k].astype(np.uint32) << 16) | w[:, k + 1]
-    raw = np.zeros(w.shape[0], dtype=np.uint32)
+    raw: np.ndarray = np.zeros(w.shape[0], dtype=np.uint32)
     for b in range(offset, offset + size):
         word = w[:, b // 2]
         byte = (word >> 8) if b % 2 == 0 else (word & 0xFF)
@@ -328,7 +328,7 @@ class BatchFramer:
         val = self.validator
         # every frame-sized window of the buffer as big-endian words: row p starts at byte p
         rows = (np.ndarray((last + 1, L // 2), dtype=">u2", buffer=buf, strides=(1, 2))
-                if last >= 0 else None)
+                if last >= 0 else np.empty((0, L // 2), dtype=">u2"))
         while pos <= last:
             if b[pos] == hi and b[pos + 1] == lo:  # fast path: frames back to back from pos
                 m = min((n - pos) // L, self._block)

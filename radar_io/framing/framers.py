@@ -2,8 +2,16 @@
 
 from __future__ import annotations
 
-from radar_io.framing.core import (BatchFramer, FrameFormat, Framer, FramerStats, FrameValidator,
-                                   SeqCounter, WordCheck, field_raw)
+from radar_io.framing.core import (
+                                   BatchFramer,
+                                   FrameFormat,
+                                   Framer,
+                                   FramerStats,
+                                   FrameValidator,
+                                   SeqCounter,
+                                   WordCheck,
+                                   field_raw,
+)
 
 _SeqTracker = SeqCounter  # the old private name
 

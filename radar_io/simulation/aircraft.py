@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.simulation.radar import FlightScript, SimConfig
 from radar_io.decoding.airdata import load_dbc
+from radar_io.simulation.radar import FlightScript, SimConfig
 
 R_EARTH_M = 6_371_000.0
 FT_M = 0.3048
@@ -132,7 +132,7 @@ class AircraftSimulator:
         ev = np.flatnonzero((self.shutter_times_s >= t0) & (self.shutter_times_s < t1))
         for i in ev.tolist():
             t = float(self.shutter_times_s[i])
-            raw_t = int(round(float(self.dau_time(t)) * 1e4))
+            raw_t = round(float(self.dau_time(t)) * 1e4)
             out.append((t, 0, mk("SHUTTER_EVENT", {"ShutterCount": self._count(i + 1),
                                                    "ShutterTime": raw_t & 0xFFFFFFFF}, False)))
         sel = np.flatnonzero((self.sample_t >= t0) & (self.sample_t < t1))
@@ -143,7 +143,7 @@ class AircraftSimulator:
                 cnt = k & 0xFFFF
                 latched = self._count(int(np.searchsorted(self.shutter_times_s, t, side="right")))
                 out.append((t, 1, mk("AIR_DATA_TIME", {
-                    "SampleCount": cnt, "SampleTime": int(round(k * 1e4 / self.cfg.sample_rate_hz)) & 0xFFFFFFFF,
+                    "SampleCount": cnt, "SampleTime": round(k * 1e4 / self.cfg.sample_rate_hz) & 0xFFFFFFFF,
                     "ShutterCountLatched": latched}, False)))
                 for name, sigs in (("AIR_DATA_1", ("IAS", "PressureAltitude")),
                                    ("ATTITUDE", ("Pitch", "Roll", "Heading")),

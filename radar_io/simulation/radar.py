@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from radar_io.encoding.rdr1 import encode_frames, raw_words
 from radar_io.coordinates.transforms import radar_sea
+from radar_io.encoding.rdr1 import encode_frames, raw_words
 from radar_io.wirespec.frame import FrameSpec, load_spec
 
 
@@ -92,9 +92,9 @@ class RadarSimulator:
         self.spec = spec or load_spec()
         self.rng = np.random.default_rng(cfg.seed)
         self.state = SimState()
-        if cfg.tod_start_s is None:
-            now = time.time()
-            cfg.tod_start_s = now % 86400.0
+        #: radar time of day at frame 0 (s); the wall clock labels it when not configured
+        self.tod_start_s = (cfg.tod_start_s if cfg.tod_start_s is not None
+                            else time.time() % 86400.0)
         self._fs = {f.name: f for f in self.spec.fields}
         self._flag = {f.name: f for f in self.spec.flags}
 
@@ -139,7 +139,7 @@ class RadarSimulator:
         dsr = np.where(good, dsr, rng.normal(0, 5.0, n))
         dele = np.where(good, dele, rng.normal(0, 0.1, n))
         daz = np.where(good, daz, rng.normal(0, 0.1, n))
-        tod = np.mod(cfg.tod_start_s + t, 86400.0)
+        tod = np.mod(self.tod_start_s + t, 86400.0)
         el_w = np.where(el_a >= 180.0, el_a - 360.0, el_a)
         values = {"seq": k & 0xFFFF, "tod_s": tod, "sr_m": sr_a, "dsr_m": dsr,
                   "el_deg": el_w, "del_deg": dele, "az_deg": az_a % 360.0, "daz_deg": daz,
@@ -181,12 +181,12 @@ class RadarSimulator:
     def stream(self, block_s: float = 0.02, duration_s: float | None = None,
                realtime: bool = False) -> Iterator[bytes]:
         """Corrupted (if configured) bytes in blocks of ``block_s``; paced to real time if asked."""
-        per = max(1, int(round(block_s * self.cfg.rate_hz)))
+        per = max(1, round(block_s * self.cfg.rate_hz))
         total = None
         if duration_s is not None:
-            total = int(round(duration_s * self.cfg.rate_hz))
+            total = round(duration_s * self.cfg.rate_hz)
         elif not self.cfg.loop:
-            total = int(math.ceil(self.script.duration_s * self.cfg.rate_hz))
+            total = math.ceil(self.script.duration_s * self.cfg.rate_hz)
         start = time.monotonic()
         sent = 0
         while total is None or sent < total:

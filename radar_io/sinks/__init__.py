@@ -9,10 +9,13 @@ from __future__ import annotations
 
 import importlib
 import os
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from radar_io.errors import ValidationError
 from radar_io.sinks.base import Batch, Sink
+
+if TYPE_CHECKING:
+    from radar_io.sinks.table import TableWriter
 
 #: kind → "module:class(target, **options)"
 SINKS: dict[str, str] = {
@@ -52,9 +55,11 @@ def table_format(target: str | None, fmt: str | None = None) -> str:
     return TABLE_EXTENSIONS.get(ext, "csv")
 
 
-def open_table(target: str, fmt: str | None = None, **options: Any) -> Sink:
-    """A table writer for ``target`` (``"-"``: stdout) in ``fmt`` or the extension's format, opened."""
-    return open_sink(table_format(target, fmt), target, **options)
+def open_table(target: str, fmt: str | None = None, **options: Any) -> TableWriter:
+    """A table writer for ``target`` (``"-"``: stdout) in ``fmt`` or the extension's format,
+    opened."""
+    # every table format is registered as a TableWriter subclass
+    return cast("TableWriter", open_sink(table_format(target, fmt), target, **options))
 
 
 def sink_class(kind: str) -> type[Sink]:
@@ -74,5 +79,14 @@ def open_sink(kind: str, target: str, **options: Any) -> Sink:
     return sink
 
 
-__all__ = ["Batch", "SINKS", "Sink", "TABLE_EXTENSIONS", "TABLE_FORMATS", "open_sink",
-           "open_table", "sink_class", "table_format"]
+__all__ = [
+    "SINKS",
+    "TABLE_EXTENSIONS",
+    "TABLE_FORMATS",
+    "Batch",
+    "Sink",
+    "open_sink",
+    "open_table",
+    "sink_class",
+    "table_format",
+]

@@ -13,14 +13,14 @@ front of a :class:`~radar_io.sinks.base.ByteLink` (file, serial port, UDP):
 
 from __future__ import annotations
 
+import builtins
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
 from typing import Any, Protocol
 
-import numpy as np
+from radar_io.decoding.measurement import Columns
 
 #: a batch of measurements: column name → equal-length array (units in the names)
-Batch = Mapping[str, np.ndarray]
+Batch = Columns
 
 
 class Sink(ABC):
@@ -52,7 +52,7 @@ class Sink(ABC):
     def send(self, batch: Batch) -> int:
         return self.write(batch)
 
-    def __enter__(self) -> "Sink":
+    def __enter__(self) -> Sink:
         self.open()
         return self
 
@@ -73,10 +73,10 @@ class ByteLink(Protocol):
     target: str
     kind: str
     handle: Any
-    bytes: int
+    bytes: int  # written so far; shadows the type in this class body, hence builtins.bytes
 
     def open(self) -> None: ...
-    def write(self, data: bytes) -> None: ...
+    def write(self, data: builtins.bytes) -> None: ...
     def close(self) -> None: ...
 
 

@@ -95,7 +95,7 @@ class SerialLink(_Link):
         try:
             if data:
                 port.write(data)
-        except Exception as exc:  # noqa: BLE001 - pyserial raises several types
+        except Exception as exc:  # pyserial raises several types
             raise UplinkError(f"{self.target}: write failed: {exc}") from exc
         self.bytes += len(data)
 
@@ -107,7 +107,7 @@ class FileLink(_Link):
 
     def open(self) -> None:
         try:
-            self.handle = open(self.target, "wb", buffering=0)
+            self.handle = open(self.target, "wb", buffering=0)  # noqa: SIM115 - the link owns it
         except OSError as exc:
             raise UplinkError(f"cannot write {self.target}: {exc.strerror}") from exc
 

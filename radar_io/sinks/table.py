@@ -59,9 +59,9 @@ class TableWriter(Sink):
         if self.target == "-":
             self._out = sys.stdout.buffer
         else:
-            from radar_io.sinks.atomic import AtomicFile
-
             import pyarrow as pa
+
+            from radar_io.sinks.atomic import AtomicFile
 
             self._atomic = AtomicFile(self.target)
             # a native stream: the writers' many small writes never go through Python

@@ -17,7 +17,7 @@ def open_bus(interface: str, channel: str, bitrate: int | None = None, **kwargs:
         kwargs["bitrate"] = bitrate
     try:
         return can.Bus(interface=interface, channel=channel, **kwargs)
-    except Exception as exc:  # noqa: BLE001 - python-can raises many types for a bad interface
+    except Exception as exc:  # python-can raises many types for a bad interface
         raise AirborneError(f"cannot open CAN interface {interface!r} channel {channel!r}: {exc}") from exc
 
 
@@ -30,7 +30,7 @@ class CanRecorder:
         self.bus, self.path = bus, str(path)
         try:
             self.writer = can.Logger(self.path)
-        except Exception as exc:  # noqa: BLE001 - unknown suffix, unwritable path, ...
+        except Exception as exc:  # unknown suffix, unwritable path, ...
             raise AirborneError(f"cannot write CAN log {self.path}: {exc}") from exc
         self.messages = 0
 
@@ -65,7 +65,7 @@ class CanRecorder:
     def close(self) -> None:
         self.writer.stop()
 
-    def __enter__(self) -> "CanRecorder":
+    def __enter__(self) -> CanRecorder:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -78,6 +78,6 @@ class ReconnectingSource:
         """Close the source (never raises); the next read reopens it."""
         try:
             self.source.close()
-        except Exception:  # noqa: BLE001 - closing a dead source must never stop the reader
+        except Exception:  # closing a dead source must never stop the reader
             log.exception("closing %s failed", self.source.url)
         self.connected = False

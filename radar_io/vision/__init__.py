@@ -37,7 +37,7 @@ _LAZY = {
     "bench_runway": "bench",
 }
 
-__all__ = ["VisionError", *sorted(_LAZY)]
+__all__ = ["VisionError", *sorted(_LAZY)]  # noqa: PLE0604 - the keys of _LAZY are names
 
 
 def __getattr__(name: str) -> Any:

@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from radar_io.vision import pose_equations as g
 from radar_io.errors import VisionError
+from radar_io.vision import pose_equations as g
 from radar_io.vision.lines import RefinedLine, binary_edges, hough_candidates, refine_line
 
 __all__ = [
@@ -136,14 +136,15 @@ def quality_from_misclosure(misclosure_deg: float, scale_deg: float = 0.2) -> fl
 
 
 def _positive(x: object) -> bool:
-    return isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x) and x > 0
+    return isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x) and float(x) > 0
 
 
 def _check_camera(focal_px: float, half_width_m: float) -> None:
     if not _positive(focal_px):
         raise VisionError(f"focal length must be a positive number of pixels, got {focal_px!r}")
     if not _positive(half_width_m):
-        raise VisionError(f"runway half-width must be a positive number of metres, got {half_width_m!r}")
+        raise VisionError(
+            f"runway half-width must be a positive number of metres, got {half_width_m!r}")
 
 
 def pose_from_pixel_lines(
@@ -210,7 +211,9 @@ def pose_from_point_sets(
         _, _, fitted = g.fit_concurrent_lines(point_sets)
     else:
         fitted = free
-    res = pose_from_pixel_lines(*fitted, focal_px, half_width_m, principal_point, camera_offset_m)
+    horizon, edge_a, edge_b = fitted
+    res = pose_from_pixel_lines(horizon, edge_a, edge_b, focal_px, half_width_m, principal_point,
+                                camera_offset_m)
     if not res.found:
         return res
     x, y = g.intersect_lines(free[1], free[2])
@@ -218,9 +221,11 @@ def pose_from_point_sets(
     mis_deg = math.degrees(math.atan2(mis_px, focal_px)) if math.isfinite(mis_px) else 90.0
     if mis_deg > params.max_misclosure_deg:
         return RunwayResult.not_found(
-            f"runway edges do not meet on the horizon (misclosure {mis_deg:.2f} deg > {params.max_misclosure_deg} deg)"
+            f"runway edges do not meet on the horizon (misclosure {mis_deg:.2f} deg > "
+            f"{params.max_misclosure_deg} deg)"
         )
-    return replace(res, misclosure_deg=mis_deg, quality=quality_from_misclosure(mis_deg, params.quality_scale_deg))
+    return replace(res, misclosure_deg=mis_deg,
+                   quality=quality_from_misclosure(mis_deg, params.quality_scale_deg))
 
 
 # --------------------------------------------------------------------------- selection
@@ -242,7 +247,8 @@ def _to_gray(image: NDArray[Any]) -> NDArray[np.uint8]:
         raise VisionError(f"expected a grey or BGR image, got an array of shape {img.shape}")
     if img.dtype != np.uint8:  # 16-bit or float frames: scale to 0..255
         top = float(np.nanmax(img)) if img.size else 0.0
-        scale = 255.0 / top if (np.issubdtype(img.dtype, np.floating) and 0 < top <= 1.0) or top > 255 else 1.0
+        unit_float = np.issubdtype(img.dtype, np.floating) and 0 < top <= 1.0
+        scale = 255.0 / top if unit_float or top > 255 else 1.0
         img = np.clip(np.nan_to_num(img.astype(np.float64) * scale), 0, 255).round().astype(np.uint8)
     return img
 
@@ -273,7 +279,8 @@ def _wedge_is_bright(
     inside = (pts[:, 0] >= 0) & (pts[:, 0] <= w - 1) & (pts[:, 1] >= 0) & (pts[:, 1] <= h - 1)
     if inside.sum() < 6:
         return False
-    vals = cv2.remap(gray_f, pts[inside, 0:1].astype(np.float32), pts[inside, 1:2].astype(np.float32), cv2.INTER_LINEAR)
+    vals = cv2.remap(gray_f, pts[inside, 0:1].astype(np.float32), pts[inside, 1:2].astype(np.float32),
+                     cv2.INTER_LINEAR)
     mid = 0.25 * (ea.dark_level + ea.bright_level + eb.dark_level + eb.bright_level)
     return float(np.mean(vals.ravel() > mid)) >= 0.7
 
@@ -327,7 +334,8 @@ def _select(
                     continue
                 inner = vp + 10.0 * (da + db) / np.linalg.norm(da + db)
                 # both edges have the runway (brighter side) inside the wedge
-                if np.dot(ea.line[:2], inner) + ea.line[2] <= 0 or np.dot(eb.line[:2], inner) + eb.line[2] <= 0:
+                if (np.dot(ea.line[:2], inner) + ea.line[2] <= 0
+                        or np.dot(eb.line[:2], inner) + eb.line[2] <= 0):
                     continue
                 if not _wedge_is_bright(gray_f, vp, ea, eb, da, db):
                     continue
@@ -348,24 +356,29 @@ def _detect(
 ) -> tuple[_Pair | None, str]:
     h, w = gray.shape
     scale = min(1.0, params.detect_max_width / w)
-    small = gray if scale >= 1.0 else cv2.resize(gray, (round(w * scale), round(h * scale)), interpolation=cv2.INTER_AREA)
+    small = gray
+    if scale < 1.0:
+        small = np.asarray(cv2.resize(gray, (round(w * scale), round(h * scale)),
+                                      interpolation=cv2.INTER_AREA), np.uint8)
     sh, sw = small.shape
     if roi is None:
         x0, y0, x1, y1 = 0, 0, sw, sh
     else:
         x0, y0 = max(0, int(roi[0] * scale)), max(0, int(roi[1] * scale))
-        x1, y1 = min(sw, int(math.ceil(roi[2] * scale))), min(sh, int(math.ceil(roi[3] * scale)))
+        x1, y1 = min(sw, math.ceil(roi[2] * scale)), min(sh, math.ceil(roi[3] * scale))
     crop = small[y0:y1, x0:x1]
     if crop.shape[0] < 16 or crop.shape[1] < 16:
         return None, "image too small"
     _, edges = binary_edges(crop, params.threshold)
     min_votes = max(15, int(params.min_votes_frac * min(crop.shape)))
-    lines = hough_candidates(edges, scale, (x0, y0), min_votes, 3 * params.max_candidates, params.hough_theta_deg)
+    lines = hough_candidates(edges, scale, (x0, y0), min_votes, 3 * params.max_candidates,
+                             params.hough_theta_deg)
     if not lines:
         return None, "no straight light/dark boundaries in the image"
     refined: list[RefinedLine] = []
     for ln in lines:
-        r = refine_line(gray_f, ln, min_contrast=params.min_contrast, step=4.0, passes=(5.0,), persist=3.0, min_support=6, min_run=3)
+        r = refine_line(gray_f, ln, min_contrast=params.min_contrast, step=4.0, passes=(5.0,),
+                        persist=3.0, min_support=6, min_run=3)
         if r is None:
             continue
         # drop lines that converged onto one already kept
@@ -380,14 +393,18 @@ def _detect(
     return _select(refined, gray_f, focal_px, params)
 
 
-def _final_refine(pair: _Pair, gray_f: NDArray[np.float32], params: ChainParams) -> tuple[RefinedLine, RefinedLine, RefinedLine]:
+def _final_refine(
+    pair: _Pair, gray_f: NDArray[np.float32], params: ChainParams
+) -> tuple[RefinedLine, RefinedLine, RefinedLine]:
     """Re-fit the three lines with samples near the other lines excluded (where profiles overlap)."""
     guard = 8.0
     hz, ea, eb = pair.horizon.line, pair.a.line, pair.b.line
-    kw = dict(min_contrast=params.min_contrast, step=2.0, passes=(3.0, 3.0))
-    new_h = refine_line(gray_f, hz, exclude=[(ea, guard), (eb, guard)], **kw)
-    new_a = refine_line(gray_f, ea, exclude=[(eb, guard), (hz, guard)], **kw)
-    new_b = refine_line(gray_f, eb, exclude=[(ea, guard), (hz, guard)], **kw)
+
+    def refit(line: NDArray[np.float64], others: tuple[NDArray[np.float64], ...]) -> RefinedLine | None:
+        return refine_line(gray_f, line, exclude=[(o, guard) for o in others],
+                           min_contrast=params.min_contrast, step=2.0, passes=(3.0, 3.0))
+
+    new_h, new_a, new_b = refit(hz, (ea, eb)), refit(ea, (eb, hz)), refit(eb, (ea, hz))
     return new_h or pair.horizon, new_a or pair.a, new_b or pair.b
 
 
@@ -420,13 +437,14 @@ def find_runway(
     if min(h, w) < 32:
         return RunwayResult.not_found(f"image too small ({w}x{h})", roi)
     pp = principal_point or ((w - 1) / 2.0, (h - 1) / 2.0)
-    gray_f = cv2.GaussianBlur(gray.astype(np.float32), (0, 0), 1.0)
+    gray_f = np.asarray(cv2.GaussianBlur(gray.astype(np.float32), (0, 0), 1.0), np.float32)
     pair, reason = _detect(gray, gray_f, focal_px, params, roi)
     if pair is None:
         return RunwayResult.not_found(reason, roi)
     lines3 = _final_refine(pair, gray_f, params)
     res = pose_from_point_sets(
-        [(r.points[:, 0], r.points[:, 1]) for r in lines3], focal_px, half_width_m, pp, camera_offset_m, params
+        [(r.points[:, 0], r.points[:, 1]) for r in lines3], focal_px, half_width_m, pp, camera_offset_m,
+        params,
     )
     return replace(res, roi=roi)
 
@@ -469,9 +487,12 @@ class RunwayTracker:
     def process(self, image: NDArray[Any]) -> RunwayResult:
         """Process the next frame."""
         roi = self._roi(np.asarray(image).shape)
-        kw = dict(camera_offset_m=self.camera_offset_m, params=self.params)
-        res = find_runway(image, self.focal_px, self.half_width_m, self.principal_point, roi=roi, **kw)
+        def find(area: tuple[int, int, int, int] | None) -> RunwayResult:
+            return find_runway(image, self.focal_px, self.half_width_m, self.principal_point,
+                               camera_offset_m=self.camera_offset_m, params=self.params, roi=area)
+
+        res = find(roi)
         if not res.found and roi is not None:
-            res = find_runway(image, self.focal_px, self.half_width_m, self.principal_point, **kw)
+            res = find(None)
         self._last_vp = res.vanishing_point_px if res.found else None
         return res

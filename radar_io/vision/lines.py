@@ -21,8 +21,10 @@ __all__ = ["RefinedLine", "binary_edges", "hough_candidates", "refine_line"]
 Line = NDArray[np.float64]
 
 
-def binary_edges(gray: NDArray[np.uint8], threshold: int | None = None) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
-    """Threshold ``gray`` to a binary image (Otsu when ``threshold`` is None) and return ``(binary, edges)``.
+def binary_edges(
+    gray: NDArray[np.uint8], threshold: int | None = None
+) -> tuple[NDArray[np.uint8], NDArray[np.uint8]]:
+    """Threshold ``gray`` to a binary image (Otsu when ``threshold`` is None); ``(binary, edges)``.
 
     The binary image is median-filtered to drop speckle from ground texture; the
     edges are its light/dark boundaries (Canny on the binary image: the spec's
@@ -34,7 +36,8 @@ def binary_edges(gray: NDArray[np.uint8], threshold: int | None = None) -> tuple
     else:
         _, binary = cv2.threshold(blur, int(threshold), 255, cv2.THRESH_BINARY)
     binary = cv2.medianBlur(binary, 5)
-    return binary, cv2.Canny(binary, 50, 150)
+    # OpenCV's stubs type every result as any numeric array; these are uint8 (no copy)
+    return np.asarray(binary, np.uint8), np.asarray(cv2.Canny(binary, 50, 150), np.uint8)
 
 
 def hough_candidates(
@@ -68,7 +71,8 @@ def hough_candidates(
         rho_mid = rho - (c * mid[0] + s * mid[1])
         if any(
             (abs(theta - th) < tol_th and abs(rho_mid - r) < merge_dist_px)
-            or (math.pi - abs(theta - th) < tol_th and abs(rho_mid + r) < merge_dist_px)  # same line, flipped normal
+            # the same line with its normal flipped
+            or (math.pi - abs(theta - th) < tol_th and abs(rho_mid + r) < merge_dist_px)
             for r, th in kept
         ):
             continue
@@ -174,7 +178,8 @@ def refine_line(
         t = np.array([-n[1], n[0]])
         foot = -ln[2] * n
         margin = hw + persist + 1.5
-        seg = _segment_in_rect(foot, t, np.array([margin, margin]), np.array([w - 1 - margin, h - 1 - margin]))
+        seg = _segment_in_rect(foot, t, np.array([margin, margin]),
+                               np.array([w - 1 - margin, h - 1 - margin]))
         if seg is None:
             return None
         s = np.arange(seg[0], seg[1], step)

@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from radar_io.errors import VisionError
 from radar_io.textfiles import read_json
 from radar_io.vision.chain import ChainParams, RunwayResult, pose_from_point_sets
-from radar_io.errors import VisionError
 
 __all__ = ["LINE_KEYS", "load_points", "pose_from_points"]
 
@@ -79,10 +79,10 @@ def pose_from_points(
     the horizon; a set of lines that does not close (edges meeting far from the
     horizon) comes back as ``found=False``.
     """
-    pts = {k: _as_points(k, points[k]) if k in points else None for k in LINE_KEYS}
-    missing = [k for k, v in pts.items() if v is None]
+    missing = [k for k in LINE_KEYS if k not in points]
     if missing:
         raise VisionError(f"missing points for {', '.join(missing)}")
+    pts = {k: _as_points(k, points[k]) for k in LINE_KEYS}
     hz = pts["horizon"]
     # the horizon as u -> v; every edge point must lie on the ground side (larger v)
     a, b = np.polyfit(hz[:, 0], hz[:, 1], 1) if float(np.ptp(hz[:, 0])) > 0 else (math.inf, 0.0)

@@ -33,6 +33,7 @@ which stay finite for every edge below the horizon; :func:`edge_slopes` and
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,7 +91,8 @@ def rotation_matrix(bank: ArrayLike, pitch: ArrayLike, yaw: ArrayLike) -> Array:
 
 
 def pixel_to_image(u: ArrayLike, v: ArrayLike, principal_point: tuple[float, float]) -> tuple[Array, Array]:
-    """Pixel ``(u right, v down)`` → spec image coordinates ``(x' right, y' up)`` about the principal point."""
+    """Pixel ``(u right, v down)`` → spec image coordinates ``(x' right, y' up)`` about the
+    principal point."""
     cx, cy = principal_point
     return _f(u) - cx, cy - _f(v)
 
@@ -141,15 +143,19 @@ def project_points(
     return f * cam[..., 1] / depth, -f * cam[..., 2] / depth, depth
 
 
-def vanishing_point(bank: ArrayLike, pitch: ArrayLike, yaw: ArrayLike, focal_px: ArrayLike) -> tuple[Array, Array]:
-    """Image of the runway direction at infinity, eq. (3)–(4): ``x'_v = f a21/a11``, ``y'_v = -f a31/a11`` [px]."""
+def vanishing_point(
+    bank: ArrayLike, pitch: ArrayLike, yaw: ArrayLike, focal_px: ArrayLike
+) -> tuple[Array, Array]:
+    """Image of the runway direction at infinity, eq. (3)–(4): ``x'_v = f a21/a11``,
+    ``y'_v = -f a31/a11`` [px]."""
     rot = rotation_matrix(bank, pitch, yaw)
     f = _f(focal_px)
     return f * rot[..., 1, 0] / rot[..., 0, 0], -f * rot[..., 2, 0] / rot[..., 0, 0]
 
 
 def horizon_line(bank: ArrayLike, pitch: ArrayLike, focal_px: ArrayLike) -> Array:
-    """Horizon of the ``z = 0`` plane, eq. (9) ``y' = tanφ x' - f tanθ / cosφ``, as a normalised image line."""
+    """Horizon of the ``z = 0`` plane, eq. (9) ``y' = tanφ x' - f tanθ / cosφ``, as a normalised
+    image line."""
     phi, th = _f(bank), _f(pitch)
     f = _f(focal_px)
     # -sinφ x' + cosφ y' + f tanθ = 0   (eq. 9 multiplied by cosφ)
@@ -169,11 +175,12 @@ def runway_edge_lines(
     """Image lines of the right (``y = +d``) and left (``y = -d``) runway edges.
 
     Built with eq. (1)–(2) from a ground point of each edge and the edges' common
-    point at infinity (independent of eq. 3–4 and 17–20).  ``camera_height_m`` is ``-z0`` of the camera.  Returns
-    ``(right, left)`` normalised image lines.
+    point at infinity (independent of eq. 3–4 and 17–20).  ``camera_height_m`` is ``-z0`` of
+    the camera.  Returns ``(right, left)`` normalised image lines.
     """
     bank, pitch, yaw, y0, h, d, f = np.broadcast_arrays(
-        _f(bank), _f(pitch), _f(yaw), _f(camera_lateral_m), _f(camera_height_m), _f(half_width_m), _f(focal_px)
+        _f(bank), _f(pitch), _f(yaw), _f(camera_lateral_m), _f(camera_height_m), _f(half_width_m),
+        _f(focal_px),
     )
     cam = np.stack([np.zeros_like(y0), y0, -h], axis=-1)
     origin = np.zeros_like(cam)
@@ -230,7 +237,8 @@ def least_squares_point(lines: ArrayLike, weights: ArrayLike | None = None) -> t
 
 
 def fit_line(x: ArrayLike, y: ArrayLike) -> Array:
-    """Total-least-squares (orthogonal) line through points ``x, y`` ``(..., n)``; needs two distinct points."""
+    """Total-least-squares (orthogonal) line through points ``x, y`` ``(..., n)``; needs two
+    distinct points."""
     x, y = _f(x), _f(y)
     mx, my = x.mean(-1), y.mean(-1)
     dx, dy = x - mx[..., None], y - my[..., None]
@@ -242,7 +250,7 @@ def fit_line(x: ArrayLike, y: ArrayLike) -> Array:
 
 
 def fit_concurrent_lines(
-    point_sets: list[tuple[ArrayLike, ArrayLike]], iterations: int = 3
+    point_sets: Sequence[tuple[ArrayLike, ArrayLike]], iterations: int = 3
 ) -> tuple[float, float, list[Array]]:
     """Fit lines to several point sets under the constraint that they all meet in one point.
 
@@ -260,7 +268,7 @@ def fit_concurrent_lines(
     vx, vy = least_squares_point(lines)
     for _ in range(iterations):
         w = []
-        for (x, y), ln in zip(sets, free):
+        for (x, y), ln in zip(sets, free, strict=True):
             t = np.array([-ln[1], ln[0]])
             s = x * t[0] + y * t[1]
             sbar = s.mean()
@@ -289,7 +297,8 @@ def bank_correct(x: ArrayLike, y: ArrayLike, bank: ArrayLike) -> tuple[Array, Ar
 def edge_slopes(
     pitch: ArrayLike, yaw: ArrayLike, y0: ArrayLike, z0: ArrayLike, half_width_m: ArrayLike
 ) -> tuple[Array, Array]:
-    """Spec eq. (17)–(18): slopes ``k1`` (right edge) and ``k2`` (left edge), ``dy''/dx''``, bank-corrected image.
+    """Spec eq. (17)–(18): slopes ``k1`` (right edge) and ``k2`` (left edge), ``dy''/dx''``,
+    bank-corrected image.
 
     ``y0`` lateral and ``z0`` vertical (down, negative in flight) camera position [m].
     """

@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from radar_io.vision import pose_equations as g
 
-__all__ = ["RunwayPose", "RunwayScene", "expected_lines", "focal_for_fov", "render_runway", "visible_edge_lengths"]
+__all__ = ["RunwayPose", "RunwayScene", "expected_lines", "focal_for_fov", "render_runway",
+           "visible_edge_lengths"]
 
 
 @dataclass(frozen=True)
@@ -204,9 +205,9 @@ class _Canvas:
         poly = _clip_rect(np.asarray(poly, float), -2.0, -2.0, self.w + 1.0, self.h + 1.0)
         if len(poly) < 3:
             return out
-        u0, v0 = (max(0, int(math.floor(poly[:, k].min()))) for k in (0, 1))
-        u1 = min(self.w, int(math.ceil(poly[:, 0].max())) + 1)
-        v1 = min(self.h, int(math.ceil(poly[:, 1].max())) + 1)
+        u0, v0 = (max(0, math.floor(poly[:, k].min())) for k in (0, 1))
+        u1 = min(self.w, math.ceil(poly[:, 0].max()) + 1)
+        v1 = min(self.h, math.ceil(poly[:, 1].max()) + 1)
         if u1 <= u0 or v1 <= v0:
             return out
         uu, vv = np.meshgrid(np.arange(u0, u1, dtype=float), np.arange(v0, v1, dtype=float))
@@ -216,7 +217,7 @@ class _Canvas:
         sign = 1.0 if area2 > 0 else -1.0
         cov = np.ones_like(uu)
         corners = np.array([[u0, v0], [u1 - 1, v0], [u0, v1 - 1], [u1 - 1, v1 - 1]], float)
-        for (px, py), (ex, ey), ln in zip(poly, e, length):
+        for (px, py), (ex, ey), ln in zip(poly, e, length, strict=True):
             if ln < 1e-9:
                 continue
             nx, ny = -sign * ey / ln, sign * ex / ln  # inward normal
@@ -284,7 +285,7 @@ def render_runway(
 
     def smooth_noise(cells: tuple[int, int], amp: float, interp: int) -> NDArray[np.float32]:
         small = rng.normal(0.0, amp, cells[::-1]).astype(np.float32)
-        return cv2.resize(small, (width, height), interpolation=interp)
+        return np.asarray(cv2.resize(small, (width, height), interpolation=interp), np.float32)
 
     if "texture" in items:  # fields, patches and fine grain; a grainy runway
         ground += smooth_noise((10, 8), 12.0, cv2.INTER_CUBIC)
@@ -298,7 +299,7 @@ def render_runway(
         c = (int(rng.uniform(0, width)), int(rng.uniform(0, height)))
         axes = (int(rng.uniform(0.05, 0.2) * width), int(rng.uniform(0.02, 0.06) * height))
         cv2.ellipse(cloud, c, axes, float(rng.uniform(-10, 10)), 0, 360, 1.0, -1)
-        cloud = cv2.GaussianBlur(cloud, (0, 0), max(2.0, 0.01 * width))
+        cloud = np.asarray(cv2.GaussianBlur(cloud, (0, 0), max(2.0, 0.01 * width)), np.float32)
         sky += cloud * float(rng.uniform(-45.0, -20.0))
     for _ in range(rng.integers(1, 4) if "roads" in items else 0):  # dark roads on the ground, any direction
         ang = rng.uniform(0, math.pi)
@@ -345,7 +346,8 @@ def render_runway(
         dvec = np.array([math.cos(ang), math.sin(ang)])
         nvec = np.array([-dvec[1], dvec[0]]) * rng.uniform(0.5, 1.2)
         ln = rng.uniform(0.2, 0.8) * width
-        poly = np.array([p - ln * dvec - nvec, p + ln * dvec - nvec, p + ln * dvec + nvec, p - ln * dvec + nvec])
+        poly = np.array([p - ln * dvec - nvec, p + ln * dvec - nvec,
+                         p + ln * dvec + nvec, p - ln * dvec + nvec])
         cov = canvas.coverage(poly)
         img = img * (1 - cov) + cov * float(rng.uniform(30.0, 90.0))
 

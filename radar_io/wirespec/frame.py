@@ -15,10 +15,11 @@ import math
 import operator
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -44,9 +45,11 @@ def spec_dir() -> Path:
     return Path(sys.prefix) / "share" / "radar-io" / "firmware_specs"
 
 
-_BINOPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
-           ast.Div: operator.truediv, ast.Pow: operator.pow}
-_UNOPS = {ast.USub: operator.neg, ast.UAdd: operator.pos}
+_BINOPS: dict[type[ast.operator], Callable[[float, float], float]] = {
+    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
+    ast.Div: operator.truediv, ast.Pow: operator.pow}
+_UNOPS: dict[type[ast.unaryop], Callable[[float], float]] = {
+    ast.USub: operator.neg, ast.UAdd: operator.pos}
 
 
 def eval_number(expr: Any, *, what: str) -> float:
@@ -184,7 +187,7 @@ class FrameSpec:
     name: str
     spec_version: str
     length: int
-    byte_order: str
+    byte_order: Literal["big", "little"]
     sync_word: int
     sync_offset: int
     crc: CrcSpec
@@ -290,10 +293,10 @@ def _build_spec(doc: dict[str, Any], path: str, sha: str) -> FrameSpec:
     length = _req(fr, "length_bytes", int, where)
     if not 4 <= length <= 4096 or length % 2:
         raise SpecError(f"{where}: length_bytes must be an even number of bytes, 4 .. 4096")
-    byte_order = _req(fr, "byte_order", str, where)
-    if byte_order != "big":
-        raise SpecError(f"{where}: byte_order = {byte_order!r} is not supported: the framers, "
+    if (order := _req(fr, "byte_order", str, where)) != "big":
+        raise SpecError(f"{where}: byte_order = {order!r} is not supported: the framers, "
                         "decoders and encoders read big-endian words only")
+    byte_order: Literal["big"] = "big"
     sync_word = _req(fr, "sync_word", int, where)
     sync_offset = _opt(fr, "sync_offset", int, where, 0)
     for key in ("name", "spec_version"):

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from radar_io.errors import SpecError
-from radar_io.wirespec.frame import ALLOWED_KEYS, CrcSpec, check_keys, eval_number, spec_dir
 from radar_io.textfiles import parse_toml, read_text
+from radar_io.wirespec.frame import ALLOWED_KEYS, CrcSpec, check_keys, eval_number, spec_dir
 
 
 def read_toml(path: str | os.PathLike[str] | None, default_name: str) -> tuple[dict[str, Any], str, str]:

@@ -7,14 +7,14 @@ import math
 import can
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
+from radar_io.analysis.clock_alignment import fit_clock
+from radar_io.decoding.airdata import decode_messages, load_dbc, read_can_log
 from radar_io.errors import AirborneError
 from radar_io.simulation.aircraft import AircraftConfig, AircraftSimulator
-from radar_io.sources.canbus import CanRecorder, open_bus
-from radar_io.decoding.airdata import decode_messages, load_dbc, read_can_log
-from radar_io.analysis.clock_alignment import fit_clock
 from radar_io.simulation.radar import FlightScript, SimConfig
+from radar_io.sources.canbus import CanRecorder, open_bus
 
 
 @pytest.fixture(scope="module")
@@ -22,6 +22,7 @@ def db():
     return load_dbc()
 
 
+@pytest.mark.slow
 def test_simulated_messages_decode_with_cantools(db):
     cfg = AircraftConfig(clock_offset_s=1234.56789, drift_ppm=50.0, qnh_hpa=1020.0,
                          shutter_count_start=7)

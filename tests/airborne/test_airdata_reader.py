@@ -8,8 +8,8 @@ import time
 import uuid
 
 import pytest
-
 from conftest import fly_on_virtual_bus
+
 from radar_io.errors import ConfigError
 from radar_io.sources.airdata import AirDataReader
 
@@ -21,6 +21,7 @@ def _until(cond, timeout_s: float = 15.0) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.slow
 def test_reader_reopens_a_failed_bus_and_samples_flow_again():
     channel = f"air-{uuid.uuid4().hex[:12]}"
     stop = threading.Event()

@@ -44,9 +44,11 @@ def test_per_group_and_combined_statistics():
     assert a["n"] == 3 and b["n"] == 2 and c["n"] == 5
     assert a["dsr_m"]["mean"] == pytest.approx(6.0) and a["dsr_m"]["std"] == pytest.approx(math.sqrt(2 / 3))
     assert b["dsr_m"]["mean"] == pytest.approx(2.0) and b["dsr_m"]["std"] == pytest.approx(1.0)
-    assert a["del_deg"]["mean"] == pytest.approx(0.04 / 3) and a["del_deg"]["std"] == pytest.approx(pstd([0.02, 0.03, -0.01]))
+    assert a["del_deg"]["mean"] == pytest.approx(0.04 / 3)
+    assert a["del_deg"]["std"] == pytest.approx(pstd([0.02, 0.03, -0.01]))
     assert b["del_deg"]["mean"] == pytest.approx(-0.02) and b["del_deg"]["std"] == pytest.approx(0.02)
-    assert a["daz_deg"]["mean"] == pytest.approx(0.01) and a["daz_deg"]["std"] == pytest.approx(pstd([-0.04, 0.04, 0.03]))
+    assert a["daz_deg"]["mean"] == pytest.approx(0.01)
+    assert a["daz_deg"]["std"] == pytest.approx(pstd([-0.04, 0.04, 0.03]))
     assert b["daz_deg"]["mean"] == pytest.approx(-0.05) and b["daz_deg"]["std"] == pytest.approx(0.05)
     # combined: mean of the per-flight means and mean of the per-flight stds (not the pooled figures)
     assert c["dsr_m"]["mean"] == pytest.approx((6.0 + 2.0) / 2)
@@ -58,7 +60,8 @@ def test_per_group_and_combined_statistics():
 
 
 def test_calibration_set_from_statistics():
-    out = bias_statistics(["F1", "F1"], ([100.0, 102.0], [1.0, 1.2], [0.0, 359.9]), ([99.0, 100.0], [1.1, 1.1], [359.9, 0.1]))
+    out = bias_statistics(["F1", "F1"], ([100.0, 102.0], [1.0, 1.2], [0.0, 359.9]),
+                          ([99.0, 100.0], [1.1, 1.1], [359.9, 0.1]))
     cal = bias_calibration(out, cal_id="flight-1", provenance={"input": "x.csv"})
     assert cal.dsr_m == pytest.approx(1.5)
     assert cal.del_deg == pytest.approx(0.0, abs=1e-12)

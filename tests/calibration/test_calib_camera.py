@@ -8,7 +8,13 @@ import cv2
 import numpy as np
 import pytest
 
-from radar_io.calibration import CalibrationError, apply_distortion, calibrate_axis, focal_lengths, scan_delta_theta
+from radar_io.calibration import (
+    CalibrationError,
+    apply_distortion,
+    calibrate_axis,
+    focal_lengths,
+    scan_delta_theta,
+)
 
 THETA = np.array([0.0, -20.0, -15.0, -10.0, -5.0, 5.0, 10.0, 15.0, 20.0, 25.0])
 

@@ -18,6 +18,7 @@ from radar_io.decoding.biases import load_calibration
 
 from .synthetic import FOCAL_MM, aerial_photo
 
+
 def run(*args: str) -> subprocess.CompletedProcess:
     """``radar-io calibrate …`` in a fresh interpreter (the installed console script's entry point)."""
     return subprocess.run([sys.executable, "-m", "radar_io.cli", "calibrate", *map(str, args)],
@@ -46,6 +47,7 @@ def write_csv(path: Path, header: str, rows) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_resection(tmp_path):
     rng = np.random.default_rng(1)
     truth = Pose(6200.0, 2800.0, -900.0, 1.2, -2.1, 37.0)
@@ -67,6 +69,7 @@ def test_resection(tmp_path):
     assert 0.3 < out["z0_m"] - refr["z0_m"] < 3.0  # the correction raises the camera
 
 
+@pytest.mark.slow
 def test_resection_bad_input(tmp_path):
     bad("resection", tmp_path / "missing.csv", "--focal-mm", 40, match="not found")
     csv = write_csv(tmp_path / "p.csv", "x_m,y_m,z_m,px_mm", [[1, 2, 3, 4]] * 4)
@@ -88,7 +91,8 @@ PAIRS = [
 
 
 def test_bias_writes_a_calibration_set(tmp_path):
-    csv = write_csv(tmp_path / "pairs.csv", "group,radar_sr_m,radar_el_deg,radar_az_deg,photo_x_m,photo_y_m,photo_z_m", PAIRS)
+    csv = write_csv(tmp_path / "pairs.csv",
+                    "group,radar_sr_m,radar_el_deg,radar_az_deg,photo_x_m,photo_y_m,photo_z_m", PAIRS)
     cal_path = tmp_path / "cal.json"
     out = ok_json("bias", csv, "-o", cal_path)
     az0 = math.degrees(math.atan2(4000, 3000))
@@ -116,11 +120,13 @@ def test_bias_writes_a_calibration_set(tmp_path):
 def test_bias_bad_input(tmp_path):
     csv = write_csv(tmp_path / "a.csv", "group,radar_sr_m,radar_el_deg,radar_az_deg", [("F1", 1, 2, 3)])
     bad("bias", csv, match="either photo_x_m")
-    csv = write_csv(tmp_path / "b.csv", "group,radar_sr_m,radar_el_deg,radar_az_deg,photo_sr_m,photo_el_deg,photo_az_deg",
+    csv = write_csv(tmp_path / "b.csv",
+                    "group,radar_sr_m,radar_el_deg,radar_az_deg,photo_sr_m,photo_el_deg,photo_az_deg",
                     [("F1", 1, 2, 3, 1, 2, 3), ("F1", 1, "", 3, 1, 2, 3)])
     bad("bias", csv, match="line 3, column radar_el_deg")
 
 
+@pytest.mark.slow
 def test_camera(tmp_path):
     theta = [0.0, -20.0, -10.0, 10.0, 20.0, 25.0]
     rows = []
@@ -134,11 +140,13 @@ def test_camera(tmp_path):
     assert x["principal_point_mm"] == pytest.approx(0.12) and y["principal_point_mm"] == pytest.approx(-0.05)
     assert out["focal_nominal_mm"] == pytest.approx(40.25)
     assert x["distortion"]["a1"] == pytest.approx(40.25 / 40.2)
-    bad("camera", write_csv(tmp_path / "c.csv", "axis,theta_deg,film_mm", rows[:5] + [("z", 1, 1)]),
+    bad("camera", write_csv(tmp_path / "c.csv", "axis,theta_deg,film_mm", [*rows[:5], ("z", 1, 1)]),
         match="line 7, column axis")
-    bad("camera", write_csv(tmp_path / "d.csv", "axis,theta,film_mm", rows), match="missing column(s) theta_deg")
+    bad("camera", write_csv(tmp_path / "d.csv", "axis,theta,film_mm", rows),
+        match="missing column(s) theta_deg")
 
 
+@pytest.mark.slow
 def test_mapgrid(tmp_path):
     crs = pyproj.CRS.from_epsg(30169)
     fwd = pyproj.Transformer.from_crs(crs.geodetic_crs, crs, always_xy=True)

@@ -48,7 +48,8 @@ def test_affine_enlargement_is_recovered_exactly(mirror):
 
 def test_grid_points_map_to_their_known_coordinates():
     t = GridTransfer(GRID, _curved_digitiser(GRID))
-    np.testing.assert_allclose(t.to_grid(_curved_digitiser(GRID).reshape(-1, 2)), GRID.reshape(-1, 2), atol=1e-9)
+    np.testing.assert_allclose(t.to_grid(_curved_digitiser(GRID).reshape(-1, 2)), GRID.reshape(-1, 2),
+                               atol=1e-9)
 
 
 def test_curved_enlargement_is_recovered_to_micrometres():

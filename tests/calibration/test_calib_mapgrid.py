@@ -15,7 +15,8 @@ from radar_io.calibration import (
     map_to_local,
 )
 
-ROMAN = "I II III IV V VI VII VIII IX X XI XII XIII XIV XV XVI XVII XVIII XIX".split()
+ROMAN = ["I", "II", "III", "IV", "V", "VI", "VII", "VIII", "IX", "X", "XI", "XII", "XIII", "XIV", "XV",
+         "XVI", "XVII", "XVIII", "XIX"]
 # zone IX origin 36°00′N 139°50′E
 LAT0, LON0 = 36.0, 139.0 + 50.0 / 60.0
 SITE_LL = (35.75, 139.95, 20.0)  # a radar site in zone IX (lat, lon deg; height m)
@@ -51,7 +52,8 @@ def test_gauss_kruger_series_matches_pyproj(epsg):
     assert np.max(np.abs(y - east)) < 1e-3
 
 
-@pytest.mark.parametrize("epsg,ellipsoid", [("EPSG:30169", "bessel"), ("EPSG:2451", "grs80"), ("EPSG:6677", "grs80")])
+@pytest.mark.parametrize("epsg,ellipsoid",
+                         [("EPSG:30169", "bessel"), ("EPSG:2451", "grs80"), ("EPSG:6677", "grs80")])
 def test_local_ned_matches_pymap3d(epsg, ellipsoid):
     crs = pyproj.CRS.from_user_input(epsg)
     fwd = pyproj.Transformer.from_crs(crs.geodetic_crs, crs, always_xy=True)
@@ -67,18 +69,21 @@ def test_local_ned_matches_pymap3d(epsg, ellipsoid):
     assert np.max(np.abs(conv.ned_m - expected)) < 1e-3
     np.testing.assert_allclose(conv.site_geodetic, SITE_LL, atol=1e-9)
     # a constant geoid height shifts every height equally: local coordinates change only by ppm
-    shifted = map_to_local(np.column_stack([n, e, h]), np.array([sn, se, SITE_LL[2]]), epsg, geoid_height_m=40.0)
+    shifted = map_to_local(np.column_stack([n, e, h]), np.array([sn, se, SITE_LL[2]]), epsg,
+                           geoid_height_m=40.0)
     assert 1e-4 < np.max(np.abs(shifted.ned_m - conv.ned_m)) < 0.1
 
 
 def _course(half_width_m, heading_deg=30.0, n=40, relief_m=60.0):
     crs = pyproj.CRS.from_epsg(30169)
-    se, sn = pyproj.Transformer.from_crs(crs.geodetic_crs, crs, always_xy=True).transform(SITE_LL[1], SITE_LL[0])
+    to_grid = pyproj.Transformer.from_crs(crs.geodetic_crs, crs, always_xy=True)
+    se, sn = to_grid.transform(SITE_LL[1], SITE_LL[0])
     rng = np.random.default_rng(2)
     along = rng.uniform(0.0, 10000.0, n)
     across = rng.uniform(-half_width_m, half_width_m, n)
     a = np.radians(heading_deg)
-    pts = np.column_stack([sn + along * np.cos(a) - across * np.sin(a), se + along * np.sin(a) + across * np.cos(a),
+    pts = np.column_stack([sn + along * np.cos(a) - across * np.sin(a),
+                           se + along * np.sin(a) + across * np.cos(a),
                            30.0 + rng.uniform(0.0, relief_m, n)])
     return map_to_local(pts, np.array([sn, se, SITE_LL[2]]), "EPSG:30169")
 

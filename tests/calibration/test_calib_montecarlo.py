@@ -18,7 +18,7 @@ SPEC_ANGLE_MRAD = (0.6, 2.6)
 
 def _solved_photo(seed: int, n: int = 10, sigma: float = 0.07):
     rng = np.random.default_rng(seed)
-    pose, pts, film = aerial_photo(rng, n=n, pose=Pose(6000.0, 2000.0, -850.0, 1.0, -1.0, 20.0))
+    _pose, pts, film = aerial_photo(rng, n=n, pose=Pose(6000.0, 2000.0, -850.0, 1.0, -1.0, 20.0))
     return pts, resect(pts, film + rng.normal(scale=sigma, size=film.shape), FOCAL_MM)
 
 
@@ -48,6 +48,7 @@ def test_noise_defaults_to_population_std_of_residuals_and_seed_reproduces():
     assert a.seed == 42 and a.runs == 20
 
 
+@pytest.mark.slow
 def test_spread_matches_linear_error_propagation():
     """With a known σ the Monte Carlo std must approach sqrt(diag(σ² (AᵀA)⁻¹)) (linear regime).
 

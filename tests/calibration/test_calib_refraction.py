@@ -55,7 +55,8 @@ def test_displacement_is_the_first_order_shift_of_a_bent_ray():
 def test_correction_raises_the_solved_height_at_3000_ft():
     # same film, solved with and without the correction: the source saw heights rise by ≈ 2 m at 3000 ft
     rng = np.random.default_rng(3)
-    pose, pts, film = aerial_photo(rng, n=12, pose=Pose(6000.0, 2000.0, -3000 * FT, 0.5, -0.5, 20.0), relief_m=0.0)
+    _pose, pts, film = aerial_photo(rng, n=12, pose=Pose(6000.0, 2000.0, -3000 * FT, 0.5, -0.5, 20.0),
+                                    relief_m=0.0)
     plain = resect(pts, film, FOCAL_MM)
     corrected = resect(pts, correct_refraction(film, FOCAL_MM, 3000 * FT, 0.0), FOCAL_MM)
     rise = plain.pose.z0_m - corrected.pose.z0_m  # Z down: higher = more negative

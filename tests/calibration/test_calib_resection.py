@@ -55,7 +55,8 @@ def test_rotation_partials_match_finite_differences():
 
 
 def test_level_camera_sees_forward_as_positive_px():
-    # heading north, level: a point ahead (north) of the nadir images at +P_x, a point to the right (east) at +P_y
+    # heading north, level: a point ahead (north) of the nadir images at +P_x, a point to the
+    # right (east) at +P_y
     pose = Pose(0.0, 0.0, -1000.0, 0.0, 0.0, 0.0)
     film = project(np.array([[100.0, 0.0, 0.0], [0.0, 100.0, 0.0]]), pose, 40.0)
     np.testing.assert_allclose(film, [[4.0, 0.0], [0.0, 4.0]], atol=1e-12)
@@ -64,7 +65,7 @@ def test_level_camera_sees_forward_as_positive_px():
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_analytic_partials_match_finite_differences(seed):
     rng = np.random.default_rng(seed)
-    pose, pts, film = aerial_photo(rng, n=10, pose=Pose(5000.0, -3000.0, -850.0, 4.0, -6.0, 123.0))
+    pose, pts, _film = aerial_photo(rng, n=10, pose=Pose(5000.0, -3000.0, -850.0, 4.0, -6.0, 123.0))
     c = pose.to_vector()
     a = residual_partials(pts, c, FOCAL_MM)
     steps = np.array([1e-3, 1e-3, 1e-3, 1e-7, 1e-7, 1e-7])
@@ -103,7 +104,8 @@ def _angle_diff(a, b):
 @pytest.mark.parametrize("seed", [10, 11, 12, 13])
 def test_agrees_with_opencv_from_a_start_200m_and_5deg_away(seed):
     rng = np.random.default_rng(seed)
-    truth = Pose(6000.0 + 500 * seed, 2500.0, -900.0, rng.uniform(-3, 3), rng.uniform(-3, 3), rng.uniform(0, 360))
+    truth = Pose(6000.0 + 500 * seed, 2500.0, -900.0, rng.uniform(-3, 3), rng.uniform(-3, 3),
+                 rng.uniform(0, 360))
     pose, pts, film = aerial_photo(rng, n=int(rng.integers(10, 15)), pose=truth)
     off = rng.normal(size=3)
     off *= 200.0 / np.linalg.norm(off)
@@ -125,7 +127,7 @@ def test_agrees_with_opencv_from_a_start_200m_and_5deg_away(seed):
 def test_agrees_with_opencv_on_noisy_film():
     # both minimise the same unweighted film-plane residuals, so they agree on noisy data too
     rng = np.random.default_rng(21)
-    pose, pts, film = aerial_photo(rng, n=12)
+    _pose, pts, film = aerial_photo(rng, n=12)
     film = film + rng.normal(scale=0.07, size=film.shape)
     r = resect(pts, film, FOCAL_MM)
     x_cv, ang_cv = _solve_pnp(pts, film, FOCAL_MM)
@@ -138,7 +140,7 @@ def test_agrees_with_opencv_on_noisy_film():
 def test_recovers_900m_40mm_55mm_geometry_without_a_start(n):
     rng = np.random.default_rng(100 + n)
     truth = Pose(7300.0, -1800.0, -900.0, -2.5, 1.7, rng.uniform(0, 360))
-    pose, pts, film = aerial_photo(rng, n=n, pose=truth)
+    _pose, pts, film = aerial_photo(rng, n=n, pose=truth)
     assert np.all(np.abs(film) <= HALF_FILM_MM)
     r = resect(pts, film, FOCAL_MM)
     assert abs(r.pose.x0_m - truth.x0_m) < 1e-6
@@ -168,7 +170,7 @@ def test_three_dimensional_points_use_the_dlt_start():
 
 def test_weights_and_covariance():
     rng = np.random.default_rng(8)
-    pose, pts, film = aerial_photo(rng, n=12)
+    _pose, pts, film = aerial_photo(rng, n=12)
     noise = np.column_stack([rng.normal(scale=0.02, size=12), rng.normal(scale=0.2, size=12)])
     w = np.tile([1 / 0.02**2, 1 / 0.2**2], (12, 1))
     r_w = resect(pts, film + noise, FOCAL_MM, weights=w)
@@ -187,7 +189,8 @@ def test_weights_and_covariance():
 def test_three_points_solve_without_redundancy():
     rng = np.random.default_rng(2)
     pose, pts, film = aerial_photo(rng, n=3)
-    start = Pose(pose.x0_m + 30, pose.y0_m - 20, pose.z0_m + 10, pose.phi_deg + 1, pose.theta_deg, pose.psi_deg - 1)
+    start = Pose(pose.x0_m + 30, pose.y0_m - 20, pose.z0_m + 10, pose.phi_deg + 1, pose.theta_deg,
+                 pose.psi_deg - 1)
     r = resect(pts, film, FOCAL_MM, start=start)
     assert abs(r.pose.z0_m - pose.z0_m) < 1e-6
     assert all(math.isnan(v) for v in r.sigma.values())
@@ -205,7 +208,8 @@ def test_degenerate_inputs_raise_clear_errors():
     with pytest.raises(CalibrationError, match="behind the camera"):
         resect(pts, film, FOCAL_MM, start=Pose(pose.x0_m, pose.y0_m, 500.0, 0, 0, 0))
     with pytest.raises(CalibrationError, match="did not converge"):
-        resect(pts, film, FOCAL_MM, start=Pose(pose.x0_m + 300, pose.y0_m, pose.z0_m, 0, 0, pose.psi_deg + 20),
+        resect(pts, film, FOCAL_MM,
+               start=Pose(pose.x0_m + 300, pose.y0_m, pose.z0_m, 0, 0, pose.psi_deg + 20),
                max_iterations=1)
     with pytest.raises(CalibrationError, match="focal"):
         resect(pts, film, -40.0)
@@ -223,6 +227,6 @@ def test_degenerate_inputs_raise_clear_errors():
 def test_mirrored_film_axis_is_refused():
     # a film-axis sign error is explained by a mirror pose below the ground: refused, not returned
     rng = np.random.default_rng(6)
-    pose, pts, film = aerial_photo(rng, n=10)
+    _pose, pts, film = aerial_photo(rng, n=10)
     with pytest.raises(CalibrationError, match="below the control points"):
         resect(pts, film * np.array([-1.0, 1.0]), FOCAL_MM)

@@ -1,16 +1,20 @@
 """Make tests/data/rdr1_golden.npz with main's decoder (commit ec9980f)."""
-import json, sys
+import json
+import sys
 from pathlib import Path
+
 import numpy as np
+
+from radar_io.benchmarks.core import corrupt_bytes
+from radar_io.decoding.biases import Calibration
+from radar_io.decoding.decoders import decode_bytes
 from radar_io.simulation.radar import RadarSimulator, SimConfig
 from radar_io.wirespec.frame import load_spec
-from radar_io.decoding.decoders import decode_bytes
-from radar_io.decoding.biases import Calibration
-from radar_io.benchmarks.core import corrupt_bytes
+
 spec = load_spec()
 sim = RadarSimulator(config=SimConfig(seed=23, tod_start_s=36000.0, loop=True, ng_per_min=600), spec=spec)
 clean, _ = sim.generate(6000)
-vec = json.load(open(Path(__file__).parent / "rdr1_vectors.json"))
+vec = json.loads((Path(__file__).parent / "rdr1_vectors.json").read_text())
 vframes = b"".join(bytes.fromhex(v["hex"]) for v in vec["frames"])
 data = vframes + clean
 damaged = corrupt_bytes(data, 0.01, seed=3)

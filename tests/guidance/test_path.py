@@ -6,12 +6,12 @@ import math
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
+
+from radar_io.coordinates.reference_path import PathError, ReferencePath, add_deviation, load_path
+from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.decoders import decode_bytes
 from radar_io.errors import ConfigError, RadarIOError
-from radar_io.coordinates.transforms import load_site
-from radar_io.coordinates.reference_path import PathError, ReferencePath, add_deviation, load_path
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 
 TOL = 1e-6
@@ -213,12 +213,13 @@ def brute_force(points, radius, px, py):
     return best[2] * best[0], best[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_random_paths_against_brute_force(seed):
     rng = np.random.default_rng(seed)
     # a zig-zag course with turns of 20..120 degrees both ways
     heading, pos, pts = rng.uniform(0, 2 * math.pi), np.zeros(2), []
-    for i in range(5):
+    for _ in range(5):
         pts.append([pos[0], pos[1], rng.uniform(200, 1500)])
         heading += rng.choice([-1, 1]) * math.radians(rng.uniform(20, 120))
         pos = pos + rng.uniform(6000, 9000) * np.array([math.cos(heading), math.sin(heading)])

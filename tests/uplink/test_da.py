@@ -6,16 +6,15 @@ import struct
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
-from radar_io.decoding.decoders import decode_bytes
-from radar_io.errors import SpecError
+
 from radar_io.coordinates.reference_path import ReferencePath, add_deviation
-from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+from radar_io.decoding.decoders import decode_bytes
 from radar_io.encoding.da import DAEncoder, decode_da_words, load_da_spec
+from radar_io.errors import SpecError, UplinkError
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 from radar_io.sinks import open_sink
 from radar_io.sinks.uplink import DASink
-from radar_io.errors import UplinkError
 
 # ---- typed in from radar-interface.md §7 and the documented defaults: channel → (column, full scale)
 CHANNELS = [("x_m", 30000.0), ("y_m", 30000.0), ("dsr_m", 50.0), ("del_deg", 1.0),
@@ -54,7 +53,7 @@ def test_words_decode_back_within_one_lsb_and_saturate_without_wrapping():
     assert len(samples) == 4000 == enc.samples                     # one group per sample
     valid = (cols["rx_good"] == 1) & (cols["go"] == 1)
     assert enc.pen_up_samples == (~valid).sum()
-    for k, ((col, fs), name) in enumerate(zip(CHANNELS, NAMES)):
+    for k, ((col, fs), name) in enumerate(zip(CHANNELS, NAMES, strict=True)):
         pen = np.array([s[k][0] for s in samples])
         ch = np.array([s[k][1] for s in samples])
         data12 = np.array([s[k][2] for s in samples])

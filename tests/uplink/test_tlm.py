@@ -9,18 +9,17 @@ import struct
 
 import numpy as np
 import pytest
-
 from conftest import ROOT
-from radar_io.decoding.decoders import decode_bytes
-from radar_io.errors import SpecError
-from radar_io.coordinates.transforms import load_site
+
 from radar_io.coordinates.reference_path import ReferencePath, add_deviation
-from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
+from radar_io.coordinates.transforms import load_site
+from radar_io.decoding.decoders import decode_bytes
 from radar_io.encoding.kinematics import Kinematics
 from radar_io.encoding.tlm1 import TelemetryDecoder, TelemetryEncoder, load_tlm_spec
+from radar_io.errors import SpecError, UplinkError
+from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 from radar_io.sinks import open_sink
 from radar_io.sinks.uplink import TelemetrySink
-from radar_io.errors import UplinkError
 
 # ---- the independent reference, typed in from radar-interface.md §8
 FRAME = struct.Struct(">HH10hH")
@@ -40,7 +39,7 @@ def ref_decode(data: bytes) -> list[dict]:
         assert sync == 0x1ACF
         assert crc == binascii.crc_hqx(fr[:24], 0xFFFF)
         d = {"seq": seq, "words": ch, "sts": ch[8] & 0xFFFF, "spare": ch[9]}
-        for (name, fs), w in zip(SCALES, ch):
+        for (name, fs), w in zip(SCALES, ch[:len(SCALES)], strict=True):  # then sts, spare
             d[name] = w * fs / 32767
         out.append(d)
     return out

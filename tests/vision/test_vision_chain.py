@@ -48,7 +48,8 @@ def _envelope_poses(n_random: int, seed: int, corners_step: int = 1) -> list[Run
 
 def _errors(res, pose: RunwayPose) -> tuple[float, float, float]:
     """(max angle error deg, relative height error, lateral error / allowed lateral error)."""
-    ang = max(abs(res.bank_deg - pose.bank_deg), abs(res.pitch_deg - pose.pitch_deg), abs(res.yaw_deg - pose.yaw_deg))
+    ang = max(abs(res.bank_deg - pose.bank_deg), abs(res.pitch_deg - pose.pitch_deg),
+              abs(res.yaw_deg - pose.yaw_deg))
     return (
         ang,
         abs(res.height_m / pose.height_m - 1.0),
@@ -75,7 +76,8 @@ def _check_pose(pose: RunwayPose, width: int, height: int, seed: int) -> bool:
         noise_sigma=float(rng.uniform(2.0, 6.0)),
     )
     in_view = min(visible_edge_lengths(pose, width, height, f, scene)) >= IN_VIEW_FRACTION * width
-    res = find_runway(render_runway(pose, width, height, f, scene), f, D, camera_offset_m=pose.camera_offset_m)
+    res = find_runway(render_runway(pose, width, height, f, scene), f, D,
+                      camera_offset_m=pose.camera_offset_m)
     if in_view:
         assert res.found, (pose, res.reason)
     if res.found:
@@ -89,11 +91,13 @@ SD_POSES = _envelope_poses(n_random=16, seed=11)
 HD_POSES = _envelope_poses(n_random=8, seed=12, corners_step=2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("index", range(len(SD_POSES)))
 def test_envelope_640x480(index):
     _check_pose(SD_POSES[index], 640, 480, seed=index)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("index", range(len(HD_POSES)))
 def test_envelope_1280x720(index):
     _check_pose(HD_POSES[index], 1280, 720, seed=100 + index)
@@ -111,11 +115,13 @@ def test_envelope_is_mostly_in_view():
 def test_camera_mounting_offset():
     """Camera 6 m ahead of, 0.4 m right of and 1.2 m above the reference point."""
     for i, pose in enumerate(
-        [RunwayPose(8.0, -4.0, 3.0, 12.0, 6.0, (6.0, 0.4, -1.2)), RunwayPose(-15.0, 2.0, -7.0, 140.0, -25.0, (6.0, 0.4, -1.2))]
+        [RunwayPose(8.0, -4.0, 3.0, 12.0, 6.0, (6.0, 0.4, -1.2)),
+         RunwayPose(-15.0, 2.0, -7.0, 140.0, -25.0, (6.0, 0.4, -1.2))]
     ):
         assert _check_pose(pose, 640, 480, seed=200 + i)
 
 
+@pytest.mark.slow
 def test_approach_with_a_narrower_lens():
     """On a 2.5-3.5 deg approach path to the threshold a 60 deg lens sees the runway too small;
     a 30 deg lens at 1280x720 finds it from 5 to 60 m height."""
@@ -123,7 +129,8 @@ def test_approach_with_a_narrower_lens():
     found = 0
     for i in range(10):
         h = float(np.exp(rng.uniform(math.log(5), math.log(60))))
-        pose = RunwayPose(rng.uniform(-10, 10), rng.uniform(-5, 2), rng.uniform(-5, 5), h, rng.uniform(-1, 1) * (3 + 0.2 * h))
+        pose = RunwayPose(rng.uniform(-10, 10), rng.uniform(-5, 2), rng.uniform(-5, 5), h,
+                          rng.uniform(-1, 1) * (3 + 0.2 * h))
         start = h / math.tan(math.radians(rng.uniform(2.5, 3.5)))
         f = focal_for_fov(1280, 30.0)
         scene = RunwayScene(seed=300 + i, runway_start_m=start, runway_length_m=3000.0)
@@ -134,6 +141,7 @@ def test_approach_with_a_narrower_lens():
     assert found >= 8
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "name, pose",
     [
@@ -173,10 +181,12 @@ def test_colour_input_and_dict_output():
     assert c.pitch_deg == pytest.approx(a.pitch_deg - math.degrees(math.atan2(20.0, f)), abs=0.05)
 
 
+@pytest.mark.slow
 def test_tracker_uses_roi_and_recovers_after_losing_the_runway():
     f = focal_for_fov(640)
     tracker = RunwayTracker(f, D)
-    poses = [RunwayPose(-6.0 + 1.5 * i, -4.0 + 0.3 * i, 2.0 - 0.4 * i, 80.0 - 6.0 * i, 8.0 - 1.5 * i) for i in range(6)]
+    poses = [RunwayPose(-6.0 + 1.5 * i, -4.0 + 0.3 * i, 2.0 - 0.4 * i, 80.0 - 6.0 * i, 8.0 - 1.5 * i)
+             for i in range(6)]
     results = []
     for i, pose in enumerate(poses):
         res = tracker.process(render_runway(pose, 640, 480, f, RunwayScene(seed=400 + i)))
@@ -186,7 +196,8 @@ def test_tracker_uses_roi_and_recovers_after_losing_the_runway():
     u0, v0, u1, v1 = results[-1].roi
     assert (u1 - u0) < 640 and (v1 - v0) < 480
     # runway lost (camera pitched up into the sky), then back somewhere else in the frame
-    lost = tracker.process(render_runway(RunwayPose(0.0, 40.0, 0.0, 40.0, 0.0), 640, 480, f, RunwayScene(seed=1)))
+    lost = tracker.process(render_runway(RunwayPose(0.0, 40.0, 0.0, 40.0, 0.0), 640, 480, f,
+                                         RunwayScene(seed=1)))
     assert not lost.found
     back_pose = RunwayPose(15.0, -9.0, -9.0, 25.0, -20.0)
     back = tracker.process(render_runway(back_pose, 640, 480, f, RunwayScene(seed=2)))
@@ -223,6 +234,7 @@ def test_bad_camera_parameters_and_images_raise_vision_error():
     assert not find_runway(img, 500.0, D).found
 
 
+@pytest.mark.slow
 def test_line_soup_is_not_a_runway():
     """Bright and dark bars across a sky/ground step: many straight boundaries, no runway."""
     rng = np.random.default_rng(0)

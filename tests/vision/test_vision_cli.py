@@ -43,12 +43,14 @@ def images(tmp_path_factory) -> dict[str, Path]:
     out["runway"] = d / "runway.png"
     cv2.imwrite(str(out["runway"]), render_runway(POSE, 640, 480, F, RunwayScene(seed=1)))
     out["sky"] = d / "sky.png"
-    cv2.imwrite(str(out["sky"]), render_runway(RunwayPose(0.0, 40.0, 0.0, 50.0, 0.0), 640, 480, F, RunwayScene(seed=2)))
+    cv2.imwrite(str(out["sky"]),
+                render_runway(RunwayPose(0.0, 40.0, 0.0, 50.0, 0.0), 640, 480, F, RunwayScene(seed=2)))
     out["junk"] = d / "junk.png"
     out["junk"].write_bytes(b"this is not a PNG")
     return out
 
 
+@pytest.mark.slow
 def test_images_to_json_lines(images):
     r = _run(str(images["runway"]), str(images["sky"]), *_camera())
     assert r.returncode == 0, r.stderr
@@ -63,6 +65,7 @@ def test_images_to_json_lines(images):
     assert second["quality"] == 0.0
 
 
+@pytest.mark.slow
 def test_principal_point_and_camera_offset_options(images):
     base = json.loads(_run(str(images["runway"]), *_camera()).stdout)
     r = _run(str(images["runway"]), *_camera("--principal-point", "319.5,219.5", "--camera-offset", "5,0,-1"))
@@ -70,9 +73,11 @@ def test_principal_point_and_camera_offset_options(images):
     moved = json.loads(r.stdout)
     # principal point 20 px higher: the same horizon is seen 20 px lower relative to it
     assert moved["pitch_deg"] == pytest.approx(base["pitch_deg"] + np.degrees(np.arctan2(20.0, F)), abs=0.05)
-    assert moved["height_m"] != pytest.approx(base["height_m"], abs=0.1)  # offset (and pitch) change the height
+    # the offset (and the pitch) change the height
+    assert moved["height_m"] != pytest.approx(base["height_m"], abs=0.1)
 
 
+@pytest.mark.slow
 def test_manual_points(images, tmp_path):
     # exact picks of the rendered pose: horizon from two directions, edges from ground points
     from radar_io.vision import pose_equations as g
@@ -105,6 +110,7 @@ def test_manual_points(images, tmp_path):
     assert r.returncode == 0 and json.loads(r.stdout)["image"] is None
 
 
+@pytest.mark.slow
 def test_sequence_from_directory_glob_and_video(tmp_path):
     frames = tmp_path / "frames"
     frames.mkdir()
@@ -122,12 +128,13 @@ def test_sequence_from_directory_glob_and_video(tmp_path):
         assert r.returncode == 0, r.stderr
         recs = [json.loads(x) for x in r.stdout.splitlines()]
         assert [x["frame"] for x in recs] == [0, 1, 2, 3]
-        for rec, pose in zip(recs, poses):
+        for rec, pose in zip(recs, poses, strict=True):
             _close_to(rec, pose)
         assert "4 frames, runway found in 4" in r.stderr
         assert "Traceback" not in r.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -142,7 +149,8 @@ def test_sequence_from_directory_glob_and_video(tmp_path):
     ],
 )
 def test_bad_input_gives_one_clear_line(images, tmp_path, args, message):
-    subst = {"missing": str(tmp_path / "nope.png"), "junk": str(images["junk"]), "runway": str(images["runway"])}
+    subst = {"missing": str(tmp_path / "nope.png"), "junk": str(images["junk"]),
+             "runway": str(images["runway"])}
     argv = [a.format(**subst) for a in args]
     if "--focal-px" not in argv:
         argv += _camera()

@@ -21,14 +21,15 @@ F = 554.2562584220408  # 640 px across a 60 deg field of view
 
 
 def _grid() -> dict[str, np.ndarray]:
-    """Every combination over the envelope: bank ±20, pitch -10..5, yaw ±10 deg, height 5..500 m, lateral ±40 m."""
+    """Every combination over the envelope: bank ±20, pitch -10..5, yaw ±10 deg, height 5..500 m,
+    lateral ±40 m."""
     banks = np.radians([-20, -7, 0, 11, 20])
     pitches = np.radians([-10, -4.5, 0, 2, 5])
     yaws = np.radians([-10, -3, 0, 6, 10])
     heights = [5, 12, 40, 150, 320, 500]
     laterals = [-40, -22.5, -5, 0, 17, 22.5, 40]  # includes camera straight above an edge
     combos = np.array(list(itertools.product(banks, pitches, yaws, heights, laterals)), dtype=float)
-    return dict(zip(("bank", "pitch", "yaw", "h", "y"), combos.T))
+    return dict(zip(("bank", "pitch", "yaw", "h", "y"), combos.T, strict=True))
 
 
 def _horizon_from_projection(bank, pitch, yaw, f=F):
@@ -182,6 +183,7 @@ def test_solve_pose_round_trips_over_the_envelope():
     np.testing.assert_allclose(sol2.lateral_m, k["y"], atol=1e-9)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     bank=st.floats(-20, 20),
@@ -219,14 +221,15 @@ def test_fit_concurrent_lines_recovers_exact_lines_and_their_common_point():
         truth.append(g.line_through(tuple(vp), tuple(vp + t)))
     vx, vy, lines = g.fit_concurrent_lines(sets)
     assert (vx, vy) == pytest.approx(tuple(vp), abs=1e-9)
-    for ln, tr in zip(lines, truth):
+    for ln, tr in zip(lines, truth, strict=True):
         assert abs(float(np.dot(ln[:2], tr[:2]))) == pytest.approx(1.0, abs=1e-12)
         assert float(g.point_line_distance(ln, *vp)) == pytest.approx(0.0, abs=1e-9)
 
 
 def test_fit_concurrent_lines_beats_independent_fits_on_noisy_edges():
     rng = np.random.default_rng(7)
-    bank, pitch, yaw, h, lat = map(np.float64, (math.radians(8), math.radians(-3), math.radians(4), 400.0, 12.0))
+    bank, pitch, yaw, h, lat = map(np.float64,
+                                   (math.radians(8), math.radians(-3), math.radians(4), 400.0, 12.0))
     right, left = g.runway_edge_lines(bank, pitch, yaw, lat, h, D, F)
     hz = g.horizon_line(bank, pitch, F)
     vx, vy = g.vanishing_point(bank, pitch, yaw, F)

@@ -32,7 +32,8 @@ def _picked_points(pose: RunwayPose, width: int, height: int, f: float, n: int, 
         ground = np.stack([xs, np.full_like(xs, side), np.zeros_like(xs)], -1)
         x, y, depth = g.project_points(ground, cam, bank, pitch, yaw, f)
         uv = np.stack(g.image_to_pixel(x, y, pp), -1)
-        ok = (depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= width - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= height - 1)
+        ok = ((depth > 0) & (uv[:, 0] >= 0) & (uv[:, 0] <= width - 1)
+              & (uv[:, 1] >= 0) & (uv[:, 1] <= height - 1))
         uv = uv[ok]
         arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(uv, axis=0).T))]
         idx = np.searchsorted(arc, np.linspace(0.0, arc[-1], n)).clip(0, len(uv) - 1)
@@ -101,14 +102,18 @@ def test_lines_that_do_not_close_are_not_a_runway():
     assert not res.found and "misclosure" in res.reason
 
 
+_EDGES = {"left_edge": [[1, 300], [2, 400]], "right_edge": [[5, 300], [9, 400]]}
+
+
 @pytest.mark.parametrize(
     "points, message",
     [
-        ({"horizon": [[0, 200]], "left_edge": [[1, 300], [2, 400]], "right_edge": [[5, 300], [9, 400]]}, "at least two"),
-        ({"horizon": [[0, 200], [9, "x"]], "left_edge": [[1, 300], [2, 400]], "right_edge": [[5, 300], [9, 400]]}, "pairs"),
-        ({"horizon": [[0, 200], [0.2, 200.1]], "left_edge": [[1, 300], [2, 400]], "right_edge": [[5, 300], [9, 400]]}, "span"),
-        ({"horizon": [[0, 200], [600, 200]], "left_edge": [[1, 100], [2, 400]], "right_edge": [[5, 300], [9, 400]]}, "below the horizon"),
-        ({"horizon": [[0, 200], [600, float("nan")]], "left_edge": [[1, 300], [2, 400]], "right_edge": [[5, 300], [9, 400]]}, "finite"),
+        ({"horizon": [[0, 200]], **_EDGES}, "at least two"),
+        ({"horizon": [[0, 200], [9, "x"]], **_EDGES}, "pairs"),
+        ({"horizon": [[0, 200], [0.2, 200.1]], **_EDGES}, "span"),
+        ({"horizon": [[0, 200], [600, 200]], **_EDGES, "left_edge": [[1, 100], [2, 400]]},
+         "below the horizon"),
+        ({"horizon": [[0, 200], [600, float("nan")]], **_EDGES}, "finite"),
         ({"horizon": [[0, 200], [600, 200]], "left_edge": [[1, 300], [2, 400]]}, "right_edge"),
     ],
 )
@@ -118,7 +123,8 @@ def test_bad_points_raise_vision_error(points, message):
 
 
 def test_load_points_file(tmp_path):
-    good = {"horizon": [[0, 200], [600, 210]], "left_edge": [[300, 230], [100, 470]], "right_edge": [[330, 230], [520, 470]]}
+    good = {"horizon": [[0, 200], [600, 210]], "left_edge": [[300, 230], [100, 470]],
+            "right_edge": [[330, 230], [520, 470]]}
     p = tmp_path / "pts.json"
     p.write_text(json.dumps(good))
     pts = load_points(p)
