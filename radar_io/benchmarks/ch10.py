@@ -82,7 +82,7 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
             for k in range(n):
                 ipts, entry = struct.unpack("<QI", body[4 + 12 * k:16 + 12 * k])
                 t = time_packets[-1][1] + dt.timedelta(
-                    microseconds=(ipts - time_packets[-1][0]) / 10)
+                    microseconds=(ipts - time_packets[-1][0]) // 10)
                 events.append((entry & 0xFFF, (entry >> 12) & 0xFFFF, ipts, t))
         off += p.packet_length
     if off != len(raw):
@@ -117,7 +117,7 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
             "chunks": len(chunks), "uart_messages": len(uart),
             "recorded_bytes": sum(len(d) for _, d in chunks),
             "time_packets": len(time_packets), "span_seconds": last_s - first_s + 1,
-            "time_packet_times": [t for _, t in time_packets],
+            "time_packets_rtc": time_packets,
             "max_time_error_us": max_dt_us, "events": counts,
             "event_times": [(names.get(n, str(n)), t) for n, _, _, t in events],
             "tmats": tmats}
@@ -140,7 +140,7 @@ def run(minutes: float = 10.0, hours: float = 1.0, workdir: str | None = None) -
                 _run_child(["-m", "radar_io.cli", "export", str(rec), "-o", str(out), "-q"])
             back = read_back(rec, out)
             res["read_back"] = {k: v for k, v in back.items()
-                                if k not in ("time_packet_times", "event_times", "tmats")}
+                                if k not in ("time_packets_rtc", "event_times", "tmats")}
         if hours > 0:
             rec = tmp / "hour.rdrlog"
             if not rec.exists():
