@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import json
 import random
+from itertools import pairwise
 from pathlib import Path
 
 import pytest
-
 from conftest import run_cli
+
 from radar_io.benchmarks.ch10 import _utc, read_back
 from radar_io.cli.main import main as cli_main
 from radar_io.framing.core import Framer
@@ -106,8 +107,8 @@ def test_export_reads_back_with_pychapter10(sim_rec: Path) -> None:
     # a time packet at every whole second of the span, one second apart
     rtc, times = zip(*b["time_packets_rtc"])
     assert len(times) == b["span_seconds"] >= 12
-    assert all((t1 - t0).total_seconds() == 1.0 for t0, t1 in zip(times, times[1:]))
-    assert {r1 - r0 for r0, r1 in zip(rtc, rtc[1:])} == {10_000_000}   # 1 s of the 10-MHz RTC
+    assert all((t1 - t0).total_seconds() == 1.0 for t0, t1 in pairwise(times))
+    assert {r1 - r0 for r0, r1 in pairwise(rtc)} == {10_000_000}   # 1 s of the 10-MHz RTC
     assert times[0].microsecond == 0
     edges = expected_edges(sim_rec)
     assert [n for n, _ in edges].count("SYNC") >= 4 and edges[0][0] == "GO_ON"
@@ -129,9 +130,9 @@ def test_gap_clock_step_big_chunk_and_event_log(crafted: tuple[Path, list[dict]]
     # the gap is covered second by second (RTC); the step shows as one jump of the wall
     # clock against the RTC, at a time packet of its own
     rtc, times = zip(*b["time_packets_rtc"])
-    assert max(r1 - r0 for r0, r1 in zip(rtc, rtc[1:])) <= 10_000_000
+    assert max(r1 - r0 for r0, r1 in pairwise(rtc)) <= 10_000_000
     jumps = [(t1 - t0).total_seconds() - (r1 - r0) / 1e7
-             for (r0, t0), (r1, t1) in zip(b["time_packets_rtc"], b["time_packets_rtc"][1:])]
+             for (r0, t0), (r1, t1) in pairwise(b["time_packets_rtc"])]
     big = [j for j in jumps if abs(j) > 1e-5]
     assert big == [pytest.approx(STEP_NS / 1e9, abs=1e-5)]
     assert len(times) >= (b["span_seconds"] - STEP_NS // 10**9)

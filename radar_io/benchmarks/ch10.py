@@ -34,7 +34,8 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
     """Read ``ch10`` with pychapter10 and compare it with ``recording``; a summary.
 
     Raises ValidationError at the first disagreement (naming the packet)."""
-    from chapter10 import C10  # test dependency: pip install --no-deps pychapter10 bitstring
+    # a test dependency, installed by the README's test command (--no-deps pychapter10)
+    from chapter10 import C10  # type: ignore[import-untyped]
 
     from radar_io.recording.rdrlog import RecordingReader
 

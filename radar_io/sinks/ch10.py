@@ -27,10 +27,10 @@ import os
 import re
 import struct
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any, Callable
+from typing import IO, Any
 
 import numpy as np
 
@@ -131,7 +131,7 @@ def _bcd(v: int) -> tuple[int, int]:
 def time_body(t_ns: int) -> bytes:
     """A time data format 1 body: CSDW and day-month-year BCD time (10 ms resolution)."""
     sec, ns = divmod(t_ns, 1_000_000_000)
-    d = dt.datetime.fromtimestamp(sec, tz=dt.timezone.utc)
+    d = dt.datetime.fromtimestamp(sec, tz=dt.UTC)
     ms = ns // 1_000_000
     leap = int(d.year % 4 == 0 and (d.year % 100 != 0 or d.year % 400 == 0))
     csdw = (1 << 9) | (leap << 8) | (TIME_FORMAT_RTC << 4) | TIME_SOURCE_INTERNAL
@@ -167,8 +167,8 @@ def tmats_text(*, origin_utc: dt.datetime, recording: str, baud: int | None,
         ("G\\DSI\\N", "1"),
         ("G\\DSI-1", "RADAR"),
         ("G\\DST-1", "STO"),
-        ("G\\COM", f"{software}: RDR1 radar serial stream of {recording}; time packets from "
-                   "the recording host's clock"),
+        ("G\\COM", f"{software}: RDR1 radar serial stream of {recording}, time packets "
+                   + "from the recording host's clock"),
         ("R-1\\ID", "RADAR"),
         ("R-1\\N", "2"),
         # channel 1: time
@@ -218,7 +218,7 @@ def _event_time(rec: Mapping[str, Any]) -> tuple[int | None, int | None]:
     mono = rec.get("mono_ns")
     t = rec.get("t_ns")
     if t is None and isinstance(rec.get("t_s"), (int, float)):
-        t = int(round(rec["t_s"] * 1e9))
+        t = round(rec["t_s"] * 1e9)
     ok = (lambda v: isinstance(v, int) and not isinstance(v, bool))
     return (mono if ok(mono) else None), (t if ok(t) else None)
 
@@ -255,7 +255,8 @@ def parse_events(records: Iterable[Mapping[str, Any]]) -> tuple[list[EventDef], 
         elif kind == "alarm":
             number = ALARM
         elif kind == "annotation" or kind in ANNOTATION_KINDS:
-            sub = rec.get("annotation") if isinstance(rec.get("annotation"), Mapping) else rec
+            nested = rec.get("annotation")
+            sub: Mapping[str, Any] = nested if isinstance(nested, Mapping) else rec
             akind = str(sub.get("annotation_kind") or (kind if kind != "annotation" else "")
                         or sub.get("subkind") or "note")
             label = str(sub.get("label") or akind)
@@ -350,7 +351,7 @@ class Ch10Writer(Sink):
         from radar_io import __version__
 
         self.software = software or f"radar_io {__version__}"
-        self.stats = Ch10Stats(events_skipped=skipped)
+        self.counts = Ch10Stats(events_skipped=skipped)
         self._names = {d.number: d.ident for d in self.defs}
         self._event_counts: dict[int, int] = {}
         self._seq: dict[int, int] = {}
@@ -374,25 +375,27 @@ class Ch10Writer(Sink):
         if self._out is not None:
             return
         self._atomic = AtomicFile(self.target)
-        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)
+        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)  # noqa: SIM115 - closed by close/abort
 
     def write(self, batch: Batch) -> int:
         """Write a batch of received chunks (``t_ns``, ``mono_ns``, ``data`` columns)."""
-        before = self.stats.bytes
+        before = self.counts.bytes
         for t, m, d in zip(batch["t_ns"], batch["mono_ns"], batch["data"]):
             self.write_chunk(int(t), int(m), bytes(d))
-        return self.stats.bytes - before
+        return self.counts.bytes - before
 
     def close(self) -> None:
         """Write what is pending and give the file its name (StorageError if the disk fails)."""
         out, atomic = self._out, self._atomic
         if out is None or atomic is None:
             return
+        if not self._started:
+            self.abort()
+            raise RecordingError(f"{self.target}: no received chunks to write (empty recording)")
         try:
-            if self._started:
-                while self._fe < len(self._file_events):  # events after the last chunk
-                    self._advance(self._file_mono(self._file_events[self._fe]))
-                self._flush()
+            while self._fe < len(self._file_events):  # events after the last chunk
+                self._advance(self._file_mono(self._file_events[self._fe]))
+            self._flush()
             out.close()
         except OSError as exc:
             self.abort()
@@ -416,8 +419,8 @@ class Ch10Writer(Sink):
         if atomic is not None:
             atomic.abort()
 
-    def stats_dict(self) -> dict[str, Any]:
-        return self.stats.as_dict()
+    def stats(self) -> dict[str, Any]:
+        return self.counts.as_dict()
 
     # ------------------------------------------------------------------ chunks
     def rtc(self, mono_ns: int) -> int:
@@ -440,7 +443,7 @@ class Ch10Writer(Sink):
             self._offset = offset
             self._time_packet(at, t_ns - t_ns % 10_000_000)
             self._next_s = (t_ns - t_ns % 10_000_000) // 1_000_000_000 + 1
-            self.stats.clock_steps += 1
+            self.counts.clock_steps += 1
             if self._derive_steps:
                 self._add_event(CLOCK_STEP, mono_ns)
         self._offset = offset
@@ -449,7 +452,7 @@ class Ch10Writer(Sink):
             self._edges(data, mono_ns)
         self._uart_message(data, mono_ns)
         self._last_mono = mono_ns
-        self.stats.chunks += 1
+        self.counts.chunks += 1
 
     def _start(self, t_ns: int, mono_ns: int) -> None:
         self._started = True
@@ -457,7 +460,7 @@ class Ch10Writer(Sink):
         self._next_s = t_ns // 1_000_000_000
         first_time = self._next_s * 1_000_000_000 - self._offset
         self._origin_mono = first_time
-        origin = dt.datetime.fromtimestamp(self._next_s, tz=dt.timezone.utc)
+        origin = dt.datetime.fromtimestamp(self._next_s, tz=dt.UTC)
         text = tmats_text(origin_utc=origin, recording=self.recording, baud=self.baud,
                           events=self.defs, software=self.software)
         self._file_events.sort(key=self._file_mono)
@@ -490,7 +493,7 @@ class Ch10Writer(Sink):
 
     def _time_packet(self, mono_ns: int, t_ns: int) -> None:
         self._emit(CHANNEL_TIME, DT_TIME_F1, self.rtc(mono_ns), time_body(t_ns))
-        self.stats.time_packets += 1
+        self.counts.time_packets += 1
 
     def _edges(self, data: bytes, mono_ns: int) -> None:
         assert self._framer is not None
@@ -523,7 +526,7 @@ class Ch10Writer(Sink):
         # entry: event number bits 11-0, count bits 27-12, occurred while recording bit 28
         self._events.append(_EVENT.pack(rtc, (n & 0xFFF) | ((count & 0xFFFF) << 12) | (1 << 28)))
         name = self._names.get(number, str(number))
-        self.stats.events[name] = self.stats.events.get(name, 0) + 1
+        self.counts.events[name] = self.counts.events.get(name, 0) + 1
 
     def _uart_message(self, data: bytes, mono_ns: int) -> None:
         if self._uart_first is not None and mono_ns - self._uart_first >= UART_PACKET_SPAN_NS:
@@ -542,8 +545,8 @@ class Ch10Writer(Sink):
             self._uart.append(_IPH_UART.pack(rtc, len(piece)))
             self._uart.append(bytes(piece) + (b"\0" if len(piece) & 1 else b""))
             self._uart_bytes += size
-            self.stats.uart_messages += 1
-            self.stats.uart_bytes += len(piece)
+            self.counts.uart_messages += 1
+            self.counts.uart_bytes += len(piece)
             view = view[len(piece):]
             if not view:
                 return
@@ -553,12 +556,12 @@ class Ch10Writer(Sink):
         if self._events:
             body = struct.pack("<I", len(self._events)) + b"".join(self._events)
             self._emit(CHANNEL_COMPUTER, DT_EVENT, self._events_rtc, body)
-            self.stats.event_packets += 1
+            self.counts.event_packets += 1
             self._events = []
         if self._uart:
             body = struct.pack("<I", 1 << 31) + b"".join(self._uart)  # CSDW: IPH present
             self._emit(CHANNEL_UART, DT_UART_F0, self._uart_rtc, body)
-            self.stats.uart_packets += 1
+            self.counts.uart_packets += 1
             self._uart, self._uart_bytes, self._uart_first = [], 0, None
 
     def _emit(self, channel: int, data_type: int, rtc: int, body: bytes) -> None:
@@ -571,8 +574,8 @@ class Ch10Writer(Sink):
         except OSError as exc:
             raise StorageError(f"cannot write {self.target}: {exc.strerror}",
                                errno=exc.errno) from exc
-        self.stats.packets += 1
-        self.stats.bytes += len(pkt)
+        self.counts.packets += 1
+        self.counts.bytes += len(pkt)
 
 
 def baud_of(source: str) -> int | None:
@@ -604,10 +607,8 @@ def export_recording(src: str | os.PathLike[str], dst: str | os.PathLike[str], *
                             baud=baud_of(str(reader.header.get("source", ""))))
         writer.open()
         try:
-            n = 0
-            for c in reader:
+            for n, c in enumerate(reader, 1):
                 writer.write_chunk(c.t_ns, c.mono_ns, c.data)
-                n += 1
                 if progress is not None and n % 4096 == 0:
                     progress(c.offset, reader.size)
             writer.close()
@@ -616,7 +617,7 @@ def export_recording(src: str | os.PathLike[str], dst: str | os.PathLike[str], *
             raise
         if progress is not None:
             progress(reader.size, reader.size)
-        out = writer.stats.as_dict()
+        out = writer.counts.as_dict()
         out["problems"] = list(reader.report.problems)
         out["events_file"] = str(ev_path) if records else None
     return out
