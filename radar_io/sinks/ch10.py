@@ -30,12 +30,12 @@ import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
-from radar_io.errors import RecordingError, StorageError
-from radar_io.sinks.atomic import AtomicFile
+from radar_io.errors import RecordingError
+from radar_io.sinks.atomic import AtomicStream
 from radar_io.sinks.base import Batch, Sink
 
 SYNC_PATTERN = 0xEB25
@@ -355,8 +355,7 @@ class Ch10Writer(Sink):
         self._names = {d.number: d.ident for d in self.defs}
         self._event_counts: dict[int, int] = {}
         self._seq: dict[int, int] = {}
-        self._out: IO[bytes] | None = None
-        self._atomic: AtomicFile | None = None
+        self._out: AtomicStream | None = None
         self._started = False
         self._origin_mono = 0
         self._offset = 0          # t_ns - mono_ns of the last chunk
@@ -372,10 +371,8 @@ class Ch10Writer(Sink):
 
     # ------------------------------------------------------------------ Sink
     def open(self) -> None:
-        if self._out is not None:
-            return
-        self._atomic = AtomicFile(self.target)
-        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)  # noqa: SIM115 - closed by close/abort
+        if self._out is None:
+            self._out = AtomicStream(self.target)
 
     def write(self, batch: Batch) -> int:
         """Write a batch of received chunks (``t_ns``, ``mono_ns``, ``data`` columns)."""
@@ -386,8 +383,8 @@ class Ch10Writer(Sink):
 
     def close(self) -> None:
         """Write what is pending and give the file its name (StorageError if the disk fails)."""
-        out, atomic = self._out, self._atomic
-        if out is None or atomic is None:
+        out = self._out
+        if out is None:
             return
         if not self._started:
             self.abort()
@@ -396,28 +393,17 @@ class Ch10Writer(Sink):
             while self._fe < len(self._file_events):  # events after the last chunk
                 self._advance(self._file_mono(self._file_events[self._fe]))
             self._flush()
-            out.close()
-        except OSError as exc:
-            self.abort()
-            raise StorageError(f"cannot write {self.target}: {exc.strerror}",
-                               errno=exc.errno) from exc
         except BaseException:
             self.abort()
             raise
-        self._out = self._atomic = None
-        atomic.commit()
+        self._out = None
+        out.close()
 
     def abort(self) -> None:
         """Drop the unfinished file; never raises."""
         out, self._out = self._out, None
-        atomic, self._atomic = self._atomic, None
         if out is not None:
-            try:
-                out.close()
-            except OSError:
-                pass
-        if atomic is not None:
-            atomic.abort()
+            out.abort()
 
     def stats(self) -> dict[str, Any]:
         return self.counts.as_dict()
@@ -569,11 +555,7 @@ class Ch10Writer(Sink):
         self._seq[channel] = (seq + 1) & 0xFF
         pkt = encode_packet(channel, data_type, seq, rtc, body)
         assert self._out is not None
-        try:
-            self._out.write(pkt)
-        except OSError as exc:
-            raise StorageError(f"cannot write {self.target}: {exc.strerror}",
-                               errno=exc.errno) from exc
+        self._out.write(pkt)
         self.counts.packets += 1
         self.counts.bytes += len(pkt)
 
