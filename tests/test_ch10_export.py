@@ -162,3 +162,19 @@ def test_export_refuses_a_raw_capture(tmp_path: Path) -> None:
     assert r.returncode == 2
     assert r.stderr.decode().count("\n") == 1 and "needs a .rdrlog" in r.stderr.decode()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.bin"]
+
+
+def test_clock_set_back_between_chunks_2_ms_apart(tmp_path: Path) -> None:
+    """The step's time packet keeps the RTC increasing and every chunk's time exact."""
+    rec, out = tmp_path / "close.rdrlog", tmp_path / "close.ch10"
+    t0, m0 = 1_800_000_000_123_456_789, 5_000_000_000
+    with RecordingWriter(rec, load_spec()) as w:
+        for k in range(3000):  # 6 s of 2-ms chunks; the wall clock set back 3.3 s halfway
+            w.write(bytes([k % 256]) * 7, t0 + k * 2_000_000 - (k >= 1500) * 3_300_000_000,
+                    m0 + k * 2_000_000)
+    assert run_cli("export", str(rec), "-o", str(out), "-q").returncode == 0
+    b = read_back(rec, out)
+    assert b["uart_messages"] == 3000 and b["max_time_error_us"] <= 1.0
+    rtc = [r for r, _ in b["time_packets_rtc"]]
+    assert rtc == sorted(set(rtc))
+    assert b["events"] == {"CLOCK_STEP": 1}

@@ -26,7 +26,6 @@ import datetime as dt
 import os
 import re
 import struct
-import sys
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -360,7 +359,7 @@ class Ch10Writer(Sink):
         self._origin_mono = 0
         self._offset = 0          # t_ns - mono_ns of the last chunk
         self._next_s = 0          # next whole wall-clock second to get a time packet
-        self._last_mono = 0
+        self._last_mono = 0       # mono_ns of the last chunk
         self._uart: list[bytes] = []
         self._uart_bytes = 0
         self._uart_first: int | None = None   # mono_ns of the pending packet's first chunk
@@ -422,13 +421,16 @@ class Ch10Writer(Sink):
         offset = t_ns - mono_ns
         if abs(offset - self._offset) > CLOCK_STEP_NS:
             # a wall-clock step: time packets on the old clock up to here, then one on the
-            # new clock at the 10-ms boundary just before this chunk
-            at = mono_ns - (t_ns % 10_000_000)
+            # new clock at the 10-ms boundary just before this chunk (just after it when
+            # the previous chunk is later than that boundary: the RTC never runs back)
+            at, label = mono_ns - t_ns % 10_000_000, t_ns - t_ns % 10_000_000
+            if at < self._last_mono:
+                at, label = at + 10_000_000, label + 10_000_000
             self._advance(at, inclusive=False)
             self._flush()
             self._offset = offset
-            self._time_packet(at, t_ns - t_ns % 10_000_000)
-            self._next_s = (t_ns - t_ns % 10_000_000) // 1_000_000_000 + 1
+            self._time_packet(at, label)
+            self._next_s = label // 1_000_000_000 + 1
             self.counts.clock_steps += 1
             if self._derive_steps:
                 self._add_event(CLOCK_STEP, mono_ns)
@@ -503,14 +505,14 @@ class Ch10Writer(Sink):
     def _add_event(self, number: int, mono_ns: int) -> None:
         if len(self._events) >= MAX_EVENTS_PER_PACKET:
             self._flush()
-        n = number
-        count = self._event_counts.get(n, 0) + 1
-        self._event_counts[n] = count
+        count = self._event_counts.get(number, 0) + 1
+        self._event_counts[number] = count
         rtc = self.rtc(mono_ns)
         if not self._events:
             self._events_rtc = rtc
         # entry: event number bits 11-0, count bits 27-12, occurred while recording bit 28
-        self._events.append(_EVENT.pack(rtc, (n & 0xFFF) | ((count & 0xFFFF) << 12) | (1 << 28)))
+        self._events.append(_EVENT.pack(rtc, (number & 0xFFF) | ((count & 0xFFFF) << 12)
+                                        | (1 << 28)))
         name = self._names.get(number, str(number))
         self.counts.events[name] = self.counts.events.get(name, 0) + 1
 
@@ -603,12 +605,3 @@ def export_recording(src: str | os.PathLike[str], dst: str | os.PathLike[str], *
         out["problems"] = list(reader.report.problems)
         out["events_file"] = str(ev_path) if records else None
     return out
-
-
-def _main(argv: list[str]) -> int:  # python -m radar_io.sinks.ch10 REC OUT (benchmarks)
-    export_recording(argv[0], argv[1])
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(_main(sys.argv[1:]))
