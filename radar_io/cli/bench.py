@@ -23,6 +23,9 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--outputs-hours", type=float, default=0.0, metavar="H",
                    help="also decode an H-hour 1 kHz recording to Parquet and CSV through the "
                    "CLI beside pyarrow anchors (fresh processes, peak RSS); 0 to skip")
+    p.add_argument("--ch10-hours", type=float, default=0.0, metavar="H",
+                   help="also export an H-hour 1 kHz recording to IRIG 106 Chapter 10 in a "
+                   "fresh process (wall, CPU, peak RSS); 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
@@ -42,6 +45,11 @@ def run(args: argparse.Namespace) -> int:
 
         result["outputs"] = outputs.run(hours=args.outputs_hours, long_hours=0.0)
         lines.append(outputs.report(result["outputs"]))
+    if args.ch10_hours > 0:
+        from radar_io.benchmarks import ch10
+
+        result["ch10"] = ch10.run(minutes=0.0, hours=args.ch10_hours)
+        lines.append(ch10.report(result["ch10"]))
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 
