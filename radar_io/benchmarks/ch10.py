@@ -132,16 +132,8 @@ def run(minutes: float = 10.0, hours: float = 1.0, workdir: str | None = None) -
     tmp.mkdir(parents=True, exist_ok=True)
     res: dict[str, Any] = {"minutes": minutes, "hours": hours}
     try:
-        if minutes > 0:
-            rec = tmp / "short.rdrlog"
-            if not rec.exists():
-                make_recording(rec, minutes / 60.0)
-            out = tmp / "short.ch10"
-            res["short_export_s"], res["short_export_cpu_s"], res["short_export_rss_mb"] = \
-                _run_child(["-m", "radar_io.cli", "export", str(rec), "-o", str(out), "-q"])
-            back = read_back(rec, out)
-            res["read_back"] = {k: v for k, v in back.items()
-                                if k not in ("time_packets_rtc", "event_times", "tmats")}
+        # the timed export first: a child's ru_maxrss includes the parent's RSS at fork,
+        # and the read-back below holds a recording in memory
         if hours > 0:
             rec = tmp / "hour.rdrlog"
             if not rec.exists():
@@ -152,6 +144,16 @@ def run(minutes: float = 10.0, hours: float = 1.0, workdir: str | None = None) -
                 ["-m", "radar_io.cli", "export", str(rec), "-o", str(out), "-q"])
             res["ch10_mb"] = out.stat().st_size / 1e6
             out.unlink()
+        if minutes > 0:
+            rec = tmp / "short.rdrlog"
+            if not rec.exists():
+                make_recording(rec, minutes / 60.0)
+            out = tmp / "short.ch10"
+            res["short_export_s"], res["short_export_cpu_s"], res["short_export_rss_mb"] = \
+                _run_child(["-m", "radar_io.cli", "export", str(rec), "-o", str(out), "-q"])
+            back = read_back(rec, out)
+            res["read_back"] = {k: v for k, v in back.items()
+                                if k not in ("time_packets_rtc", "event_times", "tmats")}
     finally:
         if workdir is None:
             shutil.rmtree(tmp, ignore_errors=True)
