@@ -162,6 +162,8 @@ def test_export_refuses_a_raw_capture(tmp_path: Path) -> None:
     assert r.returncode == 2
     assert r.stderr.decode().count("\n") == 1 and "needs a .rdrlog" in r.stderr.decode()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.bin"]
+    r = run_cli("export", str(tmp_path / "missing.rdrlog"))
+    assert r.returncode == 2 and b"input not found" in r.stderr
 
 
 def test_clock_set_back_between_chunks_2_ms_apart(tmp_path: Path) -> None:

@@ -581,6 +581,8 @@ def export_recording(src: str | os.PathLike[str], dst: str | os.PathLike[str], *
     Returns the writer's counters plus the recording's read problems."""
     from radar_io.recording.rdrlog import RecordingReader, is_recording
 
+    if not os.path.exists(src):
+        raise RecordingError(f"input not found: {src}")
     if not is_recording(src):
         raise RecordingError(f"{src}: a Chapter 10 export needs a .rdrlog recording "
                              "(its chunks' receive times), not a raw capture")
