@@ -124,6 +124,13 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
             "tmats": tmats}
 
 
+def _first_t_ns(rec: Path) -> int:
+    from radar_io.recording.rdrlog import RecordingReader
+
+    with RecordingReader(rec) as r:
+        return next(iter(r)).t_ns
+
+
 def run(minutes: float = 10.0, hours: float = 1.0, workdir: str | None = None) -> dict[str, Any]:
     """The read-back of a ``minutes`` recording and the export figures of an ``hours`` one."""
     from radar_io.benchmarks.outputs import _run_child, make_recording
@@ -148,10 +155,25 @@ def run(minutes: float = 10.0, hours: float = 1.0, workdir: str | None = None) -
             rec = tmp / "short.rdrlog"
             if not rec.exists():
                 make_recording(rec, minutes / 60.0)
+            first_t_ns = _first_t_ns(rec)
+            notes: list[dict[str, Any]] = [{"kind": "annotation", "annotation_kind": kind, "label": label,
+                      "text": f"{label} {kind}", "t_ns": first_t_ns + int(at_s * 1e9)}
+                     for label, kind, at_s in (("TP1", "test_point_start", 60.25),
+                                               ("TP1", "test_point_end", 150.5),
+                                               ("TP2", "test_point_start", 300.125),
+                                               ("TP2", "test_point_end", 420.0),
+                                               ("M1", "marker", 500.0))]
+            rec.with_suffix(".events.jsonl").write_text(
+                "".join(json.dumps(n) + "\n" for n in notes))
             out = tmp / "short.ch10"
             res["short_export_s"], res["short_export_cpu_s"], res["short_export_rss_mb"] = \
                 _run_child(["-m", "radar_io.cli", "export", str(rec), "-o", str(out), "-q"])
             back = read_back(rec, out)
+            # each annotation once, at its time (µs: pychapter10's datetime resolution)
+            errs = [min(abs((t - _utc(n["t_ns"])).total_seconds()) * 1e6
+                        for name, t in back["event_times"] if name == n["label"])
+                    for n in notes]
+            back["annotation_max_error_us"] = max(errs)
             res["read_back"] = {k: v for k, v in back.items()
                                 if k not in ("time_packets_rtc", "event_times", "tmats")}
     finally:
@@ -170,7 +192,8 @@ def report(res: dict[str, Any]) -> str:
             f"valid; {b['uart_messages']} UART messages for {b['chunks']} chunks, "
             f"{b['recorded_bytes']} bytes identical; {b['time_packets']} time packets over a "
             f"{b['span_seconds']}-s span; message times within {b['max_time_error_us']:.2f} us "
-            f"of t_ns; events {b['events']}")
+            f"of t_ns; events {b['events']} (annotations within "
+            f"{b['annotation_max_error_us']:.2f} us of their t_ns)")
     if "export_s" in res:
         lines.append(f"ch10 export of a {res['hours']:g}-h recording ({res['recording_mb']:.0f} MB"
                      f" -> {res['ch10_mb']:.0f} MB): {res['export_s']:.1f} s wall, "
