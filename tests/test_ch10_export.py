@@ -152,6 +152,8 @@ def test_decode_to_ch10_is_the_export(sim_rec: Path, tmp_path: Path) -> None:
     r = run_cli("decode", str(sim_rec), "-o", str(b), "-q")
     assert r.returncode == 0, r.stderr
     assert a.read_bytes() == b.read_bytes()
+    r = run_cli("export", str(sim_rec), "-o", str(a), "--events", str(tmp_path / "none.jsonl"))
+    assert r.returncode == 2 and b"event log not found" in r.stderr
 
 
 def test_export_refuses_a_raw_capture(tmp_path: Path) -> None:
@@ -164,6 +166,7 @@ def test_export_refuses_a_raw_capture(tmp_path: Path) -> None:
     assert sorted(p.name for p in tmp_path.iterdir()) == ["capture.bin"]
     r = run_cli("export", str(tmp_path / "missing.rdrlog"))
     assert r.returncode == 2 and b"input not found" in r.stderr
+
 
 
 def test_clock_set_back_between_chunks_2_ms_apart(tmp_path: Path) -> None:

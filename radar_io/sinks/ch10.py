@@ -587,6 +587,8 @@ def export_recording(src: str | os.PathLike[str], dst: str | os.PathLike[str], *
         raise RecordingError(f"{src}: a Chapter 10 export needs a .rdrlog recording "
                              "(its chunks' receive times), not a raw capture")
     ev_path = Path(events_path) if events_path is not None else events_path_for(src)
+    if events_path is not None and not ev_path.is_file():
+        raise RecordingError(f"event log not found: {ev_path}")
     records = read_events_file(ev_path)
     with RecordingReader(src) as reader:
         writer = Ch10Writer(dst, spec=spec, events=records, recording=Path(src).name,
