@@ -79,6 +79,8 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
             for m in p:
                 uart.append((m.ipts, bytes(m.data), m.get_time()))
         elif p.data_type == 0x02:
+            # entries read from the bytes: pychapter10 1.1.19 unpacks the entry word's
+            # 12/16-bit fields with byte-swapped bit order (event 1 comes out as 257)
             n = struct.unpack("<I", body[:4])[0] & 0xFFF
             for k in range(n):
                 ipts, entry = struct.unpack("<QI", body[4 + 12 * k:16 + 12 * k])
