@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import radar_io
@@ -115,5 +116,10 @@ def test_sink_registry_opens_every_kind(tmp_path):
         sink = open_sink(kind, str(out))
         sink.close()
         assert out.exists() and sink_class(kind).__module__ == SINKS[kind].split(":")[0]
+    ch10 = open_sink("ch10", str(tmp_path / "x.ch10"))   # received chunks, not decoded rows
+    ch10.write({"t_ns": np.array([10**18]), "mono_ns": np.array([5 * 10**9]),
+                "data": np.array([b"\xeb\x90"], dtype=object)})
+    ch10.close()
+    assert (tmp_path / "x.ch10").read_bytes()[:2] == b"\x25\xeb"    # 0xEB25, little-endian
     with pytest.raises(ValidationError, match="unknown sink kind 'nope'"):
         open_sink("nope", "x")

@@ -27,6 +27,9 @@ def add_subparser(sub: Any) -> None:
                    help="also time look-back series queries on an H-hour 1 kHz recording "
                    "through a real service over HTTP: the first query (index build), then 50 "
                    "random ranges (p50 / p95 / max), answers checked against numpy; 0 to skip")
+    p.add_argument("--ch10-hours", type=float, default=0.0, metavar="H",
+                   help="also export an H-hour 1 kHz recording to IRIG 106 Chapter 10 in a "
+                   "fresh process (wall, CPU, peak RSS); 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
@@ -51,6 +54,11 @@ def run(args: argparse.Namespace) -> int:
 
         result["lookback"] = lookback.run(hours=args.lookback_hours)
         lines.append(lookback.report(result["lookback"]))
+    if args.ch10_hours > 0:
+        from radar_io.benchmarks import ch10
+
+        result["ch10"] = ch10.run(minutes=0.0, hours=args.ch10_hours)
+        lines.append(ch10.report(result["ch10"]))
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 

@@ -18,15 +18,16 @@ CHUNK_BYTES = 1 << 20
 
 def add_subparser(sub: Any) -> None:
     p = sub.add_parser("decode", help="decode a raw capture or .rdrlog to CSV, JSON lines, "
-                       "Parquet, Arrow or ASTERIX CAT048",
+                       "Parquet, Arrow, ASTERIX CAT048 or IRIG 106 Chapter 10",
                        description="Decode RDR1 frames from a raw capture (any bytes) or a "
                        ".rdrlog recording; one row per accepted frame. The output is written "
                        "under a temporary name and renamed when complete.")
     p.add_argument("input", metavar="INPUT", help="raw capture or .rdrlog ('-' for stdin)")
     p.add_argument("-o", "--output", metavar="OUT", help="output file (default stdout)")
-    p.add_argument("--format", choices=("csv", "jsonl", "parquet", "arrow", "ast"),
-                   help="default from OUT's extension (.csv .jsonl .parquet .arrow .ast), "
-                   "else csv; ast = ASTERIX CAT048 data blocks (SAC/SIC from --site)")
+    p.add_argument("--format", choices=("csv", "jsonl", "parquet", "arrow", "ast", "ch10"),
+                   help="default from OUT's extension (.csv .jsonl .parquet .arrow .ast .ch10), "
+                   "else csv; ast = ASTERIX CAT048 data blocks (SAC/SIC from --site); ch10 = "
+                   "IRIG 106 Chapter 10 of a .rdrlog's received bytes, as `radar-io export`")
     p.add_argument("--stats", metavar="STATS.json", help="write the framer counters here")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.add_argument("--path", metavar="PATH", help="reference path TOML: adds dy_m,dz_m,along_m,leg")
@@ -49,6 +50,13 @@ def run(args: argparse.Namespace) -> int:
     from radar_io.sinks.table import TableWriter
 
     common = load_common(args)
+    kind = args.format or _extension_kind(args.output)
+    if kind == "ch10":  # the received chunks with their times, not decoded rows
+        from radar_io.cli.export import export
+
+        if not args.output:
+            raise ConfigError("a Chapter 10 output needs -o OUT.ch10 (a file, not stdout)")
+        return export(args.input, args.output, spec=common["spec"], quiet=args.quiet)
     path, tlm, da = _guidance_outputs(args)  # bad options fail before any output is created
     if args.input != "-" and not os.path.exists(args.input):
         raise ConfigError(f"input not found: {args.input}")
@@ -67,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
                                progress=lambda d, t: _progress(progress, d, t, state),
                                report=report)
     writer: TableWriter | AsterixFileWriter
-    if args.format == "ast" or (args.format is None and (args.output or "").lower().endswith(".ast")):
+    if kind == "ast":
         writer = AsterixFileWriter(args.output or "-", site=common["site"])
         writer.open()
     else:
@@ -119,6 +127,14 @@ def run(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ConfigError(f"cannot write {args.stats}: {exc.strerror}") from exc
     return 0
+
+
+def _extension_kind(output: str | None) -> str | None:
+    """The non-table sink kind an output file's extension names (.ast, .ch10), if any."""
+    from radar_io.sinks import SINKS
+
+    ext = os.path.splitext(output or "")[1].lower().lstrip(".")
+    return ext if ext in ("ast", "ch10") and ext in SINKS else None
 
 
 def _terminate_as_interrupt() -> Any:

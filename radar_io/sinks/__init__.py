@@ -24,6 +24,7 @@ SINKS: dict[str, str] = {
     "asterix": "radar_io.sinks.asterix:AsterixSink",
     "mqtt": "radar_io.sinks.mqtt:MqttSink",
     "ast": "radar_io.sinks.asterix:AsterixFileWriter",   # decode -o OUT.ast (not a table)
+    "ch10": "radar_io.sinks.ch10:Ch10Writer",  # IRIG 106 Chapter 10 from received chunks
 }
 
 

@@ -84,3 +84,39 @@ class AtomicFile:
             self.commit()
         else:
             self.abort()
+
+
+class AtomicStream:
+    """A buffered binary file written under a temporary name: :meth:`write`, then
+    :meth:`close` (flush, fsync, rename) or :meth:`abort` (delete). Disk trouble is a
+    StorageError naming the file."""
+
+    def __init__(self, path: str | os.PathLike[str], buffering: int = 1 << 20) -> None:
+        self.atomic = AtomicFile(path)
+        self.path = self.atomic.path
+        self._f = open(self.atomic.tmp_path, "wb", buffering=buffering)  # noqa: SIM115
+
+    def write(self, data: bytes) -> None:
+        try:
+            self._f.write(data)
+        except OSError as exc:
+            raise StorageError(f"cannot write {self.path}: {exc.strerror}",
+                               errno=exc.errno) from exc
+
+    def close(self) -> None:
+        """Flush and give the file its name."""
+        try:
+            self._f.close()
+        except OSError as exc:
+            self.abort()
+            raise StorageError(f"cannot write {self.path}: {exc.strerror}",
+                               errno=exc.errno) from exc
+        self.atomic.commit()
+
+    def abort(self) -> None:
+        """Drop the unfinished file; never raises."""
+        try:
+            self._f.close()
+        except OSError:
+            pass
+        self.atomic.abort()
