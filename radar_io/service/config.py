@@ -45,6 +45,12 @@ class ServiceConfig:
     ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
     ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.05  #: fan-out tick (s)
     allowed_origins: list[str] = field(default_factory=list)  #: besides the same host
+    #: Host names served besides loopback and the bound address ("*": no Host check)
+    allowed_hosts: list[str] = field(default_factory=list)
+    max_reports: Annotated[int, Ge(1), Le(64)] = 2         #: reports built at once (429 beyond)
+    max_sync_queries: Annotated[int, Ge(1), Le(64)] = 4    #: a recording's sync events at once
+    max_downloads: Annotated[int, Ge(1), Le(256)] = 4      #: recording downloads at once
+    max_series_queries: Annotated[int, Ge(1), Le(64)] = 4  #: series queries at once
     max_body_kb: Annotated[int, Ge(1), Le(1 << 20)] = 1024    #: JSON bodies (413 beyond)
     max_upload_mb: Annotated[int, Ge(1), Le(1 << 16)] = 512   #: /api/runway uploads
     max_header_kb: Annotated[int, Ge(1), Le(1024)] = 16       #: all request headers (431 beyond)
@@ -80,10 +86,22 @@ class ServiceConfig:
                 tok = Path(self.token_file).read_text(encoding="utf-8").strip()
             except OSError as exc:
                 raise ConfigError(f"cannot read token file {self.token_file}: {exc.strerror}") from exc
+            except UnicodeDecodeError:  # not chained: the error holds bytes of the token
+                raise ConfigError(f"token file {self.token_file} is not UTF-8 text") from None
             if not tok:
                 raise ConfigError(f"token file {self.token_file} is empty")
             return tok
         return None
+
+
+#: a config key whose name holds one of these words has a secret value: never echoed
+SECRET_WORDS = ("password", "token", "secret", "key")
+
+
+def is_secret_name(name: str) -> bool:
+    """Whether a key named ``name`` holds a secret (its value is never put in a message)."""
+    low = name.lower()
+    return any(w in low for w in SECRET_WORDS)
 
 
 def _validate(doc: dict[str, Any], where: str) -> ServiceConfig:
@@ -101,8 +119,17 @@ def _validate(doc: dict[str, Any], where: str) -> ServiceConfig:
     except pydantic.ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
+        if is_secret_name(loc):  # not chained either: pydantic's own text holds the value
+            raise ConfigError(f"{where}: field {loc!r}: {err['msg']} (value withheld)") \
+                from None
         raise ConfigError(f"{where}: field {loc!r}: {err['msg']} (got {err.get('input')!r})") \
             from exc
+    from radar_io.sources import check_source_url
+
+    try:
+        check_source_url(cfg.source)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: field 'source': {exc}") from exc
     if cfg.can is not None and ":" not in cfg.can:
         raise ConfigError(f"{where}: field 'can': expected 'interface:channel', e.g. "
                           f"socketcan:can0 (got {cfg.can!r})")
