@@ -25,7 +25,6 @@ import html
 import io
 import os
 from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -404,21 +403,12 @@ def report_format(output: str, fmt: str | None = None) -> str:
 def write_report(recording: str | os.PathLike[str], output: str | os.PathLike[str] | io.BytesIO,
                  fmt: str = "html", *, site: Any = None, calibration: Any = None,
                  ref_path: Any = None, airdata: str | None = None, spec: Any = None,
-                 progress: Callable[[int, int], None] | None = None,
-                 draw_lock: AbstractContextManager[Any] | None = None) -> dict[str, Any]:
-    """Decode ``recording`` and write its report; returns the summary (+ ``pages`` for PDF).
-    ``draw_lock`` is held while figures are drawn (pyplot's state is process-wide), not
-    while the recording is decoded."""
+                 progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """Decode ``recording`` and write its report; returns the summary (+ ``pages`` for PDF)."""
     from radar_io.analysis.flight_digest import digest_recording
 
     d = digest_recording(recording, site=site, calibration=calibration, ref_path=ref_path,
                          spec=spec, progress=progress)
-    with draw_lock or nullcontext():
-        return _write(d, output, fmt, airdata)
-
-
-def _write(d: FlightDigest, output: str | os.PathLike[str] | io.BytesIO, fmt: str,
-           airdata: str | None) -> dict[str, Any]:
     rep = build_report(d, airdata=airdata)
     try:
         info: dict[str, Any] = {**rep.summary, "figures": len(rep.figures)}
@@ -437,3 +427,12 @@ def _write(d: FlightDigest, output: str | os.PathLike[str] | io.BytesIO, fmt: st
         return info
     finally:
         rep.close()
+
+
+def report_bytes(recording: str | os.PathLike[str], fmt: str, site: Any = None,
+                 calibration: Any = None, ref_path: Any = None, spec: Any = None) -> bytes:
+    """The report as bytes (the service builds it in a worker process: plain arguments)."""
+    buf = io.BytesIO()
+    write_report(recording, buf, fmt, site=site, calibration=calibration, ref_path=ref_path,
+                 spec=spec)
+    return buf.getvalue()

@@ -25,6 +25,7 @@ from radar_io.service.acquisition import Acquisition
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
+from radar_io.service.limits import KIND_KEYS, ExpensiveLimiter
 from radar_io.sources.replay import ReplaySource
 from radar_io.wirespec.frame import load_spec
 
@@ -75,6 +76,8 @@ class ServiceState:
                 raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
                                   f"{exc.strerror}") from exc
         self.runway_jobs: Any = None  # RunwayJobs, created by the runway router on first use
+        #: reports, sync-event queries, downloads, series: bounded, on their own pool
+        self.limits = ExpensiveLimiter({k: getattr(cfg, key) for k, key in KIND_KEYS.items()})
         self.acq = Acquisition(cfg.source, self.spec, self.recorder, self.history,
                                self.hub.publish_threadsafe, site=self.site, calibration=cal)
         self.replay: ReplaySource | None = None
@@ -161,6 +164,7 @@ class ServiceState:
             steps.append(("archiver", self.archiver.close))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files
             steps.append(("runway jobs", self.runway_jobs.close))
+        steps.append(("expensive requests", self.limits.close))
         steps += [(f"sink {n}", w.close) for n, w in self.sinks.items()]
         if self.mqtt is not None:
             steps.append(("mqtt", self.mqtt.close))  # last word on PREFIX/status: offline
@@ -222,6 +226,7 @@ class ServiceState:
         st["uplink"] = {k: w.stats() for k, w in self.sinks.items()}
         st["publish"] = {"mqtt": self.mqtt.stats()} if self.mqtt is not None else {}
         st["airdata"] = self.air.stats() if self.air is not None else None
+        st["expensive"] = self.limits.stats()
         return st
 
 

@@ -13,7 +13,7 @@ from starlette.websockets import WebSocketDisconnect
 
 from radar_io.errors import NotFoundError
 from radar_io.service.errors import responses
-from radar_io.service.routers.deps import get_state
+from radar_io.service.routers.deps import get_state, service_of
 from radar_io.service.state import ServiceState
 
 router = APIRouter(tags=["live"])
@@ -70,7 +70,7 @@ async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", g
                   ) -> None:
     """Live messages: one JSON object per frame, or arrays with ``batch=1``; ``from=N``
     resumes after msg_seq N; ``max_hz`` decimates. Beyond ``ws_max_clients``: closed 1013."""
-    state: ServiceState = get_state(ws)
+    state = service_of(ws)
     hub = state.hub
     await ws.accept()
     if hub.full():
