@@ -160,9 +160,9 @@ class GuardMiddleware:
             return
         seen = 0
         started = False
-        # the last body message (more_body false) or a disconnect was seen; a declared
-        # Content-Length is known to be within the limit
-        body_done = "content-length" in hdr
+        # the last body message (more_body false) or a disconnect was seen; only a chunked
+        # body can be longer than the limit by now (a declared length was checked above)
+        body_done = "chunked" not in hdr.get("transfer-encoding", "").lower()
         refused = False  # the guard answered 413: the route sees a disconnect, its answer goes
 
         async def counted_receive() -> dict[str, Any]:

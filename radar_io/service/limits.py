@@ -45,8 +45,6 @@ KIND_KEYS = {"reports": "max_reports", "sync": "max_sync_queries",
 COMPUTING = frozenset({"reports", "sync", "series"})
 #: Retry-After bounds (s)
 RETRY_MIN_S, RETRY_MAX_S = 1, 60
-
-
 #: worker processes' niceness: the reader thread and the event loop come first on the CPU
 WORKER_NICE = 10
 
