@@ -2,7 +2,9 @@
 
 Every field is validated on its own (type, range, choice); an unknown key, a wrong type
 or a value out of range is refused in one line naming the file and the field
-(:class:`~radar_io.errors.ConfigError`; ``serve`` exits 2).
+(:class:`~radar_io.errors.ConfigError`; ``serve`` exits 2); the value is quoted, except
+for a key named like a secret (:func:`is_secret_name`). A source URL of an unknown scheme
+is refused here too.
 
 The control token comes from the environment variable ``RADAR_IO_TOKEN`` or
 from the file named by ``token_file``; there is never a default token. With no
