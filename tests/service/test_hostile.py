@@ -186,3 +186,26 @@ def test_batch_stream_sends_arrays_and_extra_clients_are_refused(svc):
     assert code == 1013
     st = json.loads(urllib.request.urlopen(svc.base + "/api/status", timeout=5).read())
     assert st["ws_refused"] >= 1
+
+
+def test_host_policy_and_the_origins_host():
+    """Which Host names pass, by bind address and allowed_hosts; an Origin equal to a Host
+    that is not allowed does not pass either (the rebinding case at the Origin check)."""
+    from radar_io.service.guard import HostPolicy, origin_allowed
+
+    local = HostPolicy([], "127.0.0.1")
+    assert all(local.allows(h) for h in ("127.0.0.1:8000", "LOCALHOST:1", "[::1]:8000",
+                                         "localhost.", "::1"))
+    assert not any(local.allows(h) for h in ("rebind.example:8000", "192.168.1.20:8000",
+                                             "127.0.0.2", "[::2]:80", ""))
+    lan = HostPolicy(["radar-gs.local"], "0.0.0.0")  # all interfaces: any address, and names listed
+    assert lan.allows("192.168.1.20:8000") and lan.allows("[fe80::1]:8000")
+    assert lan.allows("Radar-GS.local:8000") and not lan.allows("rebind.example")
+    bound = HostPolicy([], "192.168.1.20")
+    assert bound.allows("192.168.1.20:8000") and not bound.allows("10.0.0.1:8000")
+    assert HostPolicy(["*"]).allows("anything.example")
+    evil = "rebind.example:8000"
+    assert not origin_allowed(f"http://{evil}", evil, frozenset(), local)
+    assert origin_allowed("http://127.0.0.1:8000", "127.0.0.1:8000", frozenset(), local)
+    assert origin_allowed("https://radar.example.org/", evil, frozenset({"https://radar.example.org"}),
+                          local)
