@@ -14,8 +14,9 @@ on threads). The workers run at nice 10, so acquisition and the event loop keep 
 first. Downloads only wait for the disk: they stream on a small thread pool of their
 own. Neither is the default thread pool that the status, track and control routes use.
 
-A route uses it in one line (``fn`` and its arguments must pickle: a module-level
-function of plain data)::
+A worker that dies (killed for memory) fails its request with 503 and the next request
+gets a fresh pool. A route uses it in one line (``fn`` and its arguments must pickle: a
+module-level function of plain data)::
 
     return await state.limits.run("series", query_series, path, columns)
 """
@@ -30,11 +31,14 @@ import threading
 import time
 from collections.abc import AsyncIterator, Callable, Iterator, Mapping
 from concurrent.futures import Executor, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any, TypeVar
 
 from fastapi import HTTPException
 from starlette.responses import FileResponse, StreamingResponse
 from starlette.types import Receive, Scope, Send
+
+from radar_io.errors import UnavailableError
 
 T = TypeVar("T")
 
@@ -107,14 +111,29 @@ class ExpensiveLimiter:
         """``fn(*args)`` within the limit of ``kind``, in a worker process for a computing
         kind. The slot is freed when the call ends, even if the client has gone."""
         release = self.acquire(kind)
+        executor = self._executor(kind)
         try:  # submitted from a thread: it may start a worker process, which takes a moment
             fut = await asyncio.get_running_loop().run_in_executor(
-                self.pool, self._executor(kind).submit, fn, *args)
-        except BaseException:
+                self.pool, executor.submit, fn, *args)
+        except BaseException as exc:
             release()
+            if isinstance(exc, BrokenProcessPool):
+                self._drop(executor)
+                raise UnavailableError(f"{kind}: the worker processes had died; try again") \
+                    from exc
             raise
         fut.add_done_callback(lambda _f: release())
-        return await asyncio.wrap_future(fut)
+        try:
+            return await asyncio.wrap_future(fut)
+        except BrokenProcessPool as exc:  # killed (out of memory?): a new pool next time
+            self._drop(executor)
+            raise UnavailableError(f"{kind}: the worker process died (out of memory?)") from exc
+
+    def _drop(self, executor: Executor) -> None:
+        with self._lock:
+            if self._processes is executor:
+                self._processes = None
+        executor.shutdown(wait=False, cancel_futures=True)
 
     def stats(self) -> dict[str, dict[str, int]]:
         """Per kind: ``running``, ``limit``, ``refused`` (429 so far)."""

@@ -83,7 +83,7 @@ async def recording_sync_events(state: ServiceState, path: os.PathLike[str]
     return events
 
 
-@router.get("/api/sync-events", responses=responses(404, 422, 429))
+@router.get("/api/sync-events", responses=responses(404, 422, 429, 503))
 async def sync_events(recording: str | None = Query(None, pattern=ID_PATTERN,
                                                     description="recording id; none = live"),
                       limit: int = Query(1000, ge=1, le=100000),

@@ -17,7 +17,7 @@ router = APIRouter(tags=["recordings"])
 
 @router.get("/api/recordings/{rec_id}/report",
             responses={200: {"content": {"text/html": {}, "application/pdf": {}}},
-                       **responses(404, 422, 429)})
+                       **responses(404, 422, 429, 503)})
 async def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
                  format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
                  state: ServiceState = Depends(get_state)) -> Response:
