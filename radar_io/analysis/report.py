@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.analysis.flight_digest import FlightDigest, decimate_index
+from radar_io.analysis.flight_digest import FlightDigest
 from radar_io.errors import ConfigError
 
 FORMATS = ("html", "pdf")
@@ -81,7 +81,7 @@ def _path_radar_polyline(d: FlightDigest, step_m: float = 50.0) -> tuple[np.ndar
 def _fig_plan(d: FlightDigest) -> Any:
     plt = _plt()
     c = d.columns
-    i = decimate_index(d.frames)
+    i = d.plot_index()
     x, y = c["x_m"][i], c["y_m"][i]
     fig, ax = plt.subplots(figsize=(8, 7))
     ax.plot(y / 1e3, x / 1e3, ".", ms=1.5, color="tab:blue", label="radar track", rasterized=True)
@@ -108,7 +108,7 @@ def _fig_plan(d: FlightDigest) -> Any:
 def _fig_height(d: FlightDigest) -> Any:
     plt = _plt()
     c = d.columns
-    i = decimate_index(d.frames)
+    i = d.plot_index()
     fig, ax = plt.subplots(figsize=(10, 4.5))
     ax.plot(np.hypot(c["x_m"][i], c["y_m"][i]) / 1e3, c["h_m"][i], ".", ms=1.5,
             label="radar H", rasterized=True)
@@ -127,7 +127,7 @@ def _fig_height(d: FlightDigest) -> Any:
 def _fig_deviation(d: FlightDigest) -> Any:
     plt = _plt()
     c = d.columns
-    i = decimate_index(d.frames, 6000)
+    i = d.plot_index(6000)
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     along = c["along_m"][i] / 1e3
     a1.plot(along, c["dy_m"][i], lw=0.6, color="tab:blue", rasterized=True)
@@ -145,7 +145,7 @@ def _fig_deviation(d: FlightDigest) -> Any:
 def _fig_angles(d: FlightDigest) -> Any:
     plt = _plt()
     c = d.columns
-    i = decimate_index(d.frames)
+    i = d.plot_index()
     t = c["t_s"][i]
     fig, axes = plt.subplots(3, 2, figsize=(11, 7.5), sharex=True)
     for row, (main, err, unit) in enumerate((("sr_m", "dsr_m", "m"), ("el_deg", "del_deg", "deg"),
@@ -167,23 +167,22 @@ def _fig_angles(d: FlightDigest) -> Any:
 def _fig_link(d: FlightDigest) -> Any:
     plt = _plt()
     c = d.columns
-    i = decimate_index(d.frames)
+    i = d.plot_index()
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5), sharex=True,
                                  gridspec_kw={"height_ratios": [2, 1]})
     a1.step(d.counter_t_s, d.counter_crc, where="post", label="CRC errors (cumulative)")
     a1.step(d.counter_t_s, d.counter_gaps, where="post", label="SEQ gaps (cumulative)")
-    seq = c["seq"].astype(np.int64)
-    jumps = np.flatnonzero(np.diff(seq) != 1)
+    jumps = d.seq_jump_t_s[np.isfinite(d.seq_jump_t_s)]
     if jumps.size:
-        a1.plot(c["t_s"][jumps + 1], np.zeros(jumps.size), "|", color="tab:red", ms=12,
+        a1.plot(jumps, np.zeros(jumps.size), "|", color="tab:red", ms=12,
                 label="SEQ discontinuity")
     a1.set_ylabel("count")
     a1.legend(fontsize=8, loc="upper left")
     a1.grid(alpha=0.3)
     a1.set_title("Link health: CRC errors and SEQ gaps")
     # flags reduced by block minimum: a dropout shorter than the plotting step still shows
-    step = i[1] - i[0] if i.size > 1 else 1
-    go, good = (np.minimum.reduceat(c[k].astype(np.int8), i) for k in ("go", "rx_good"))
+    step = d.stride * (int(i[1] - i[0]) if i.size > 1 else 1)
+    go, good = (np.minimum.reduceat(d.flag_min[k], i) for k in ("go", "rx_good"))
     a2.step(c["t_s"][i], go + 1.5, where="post", label="GO (upper)")
     a2.step(c["t_s"][i], good, where="post", label="RX GOOD (lower)")
     a2.set_yticks([0, 1, 1.5, 2.5], ["0", "1", "0", "1"])
@@ -210,14 +209,14 @@ def _fig_airdata(alt: dict[str, np.ndarray], tod0_s: float) -> Any:
 
 def _airdata(d: FlightDigest, can_log: str | os.PathLike[str], dbc: Any = None
              ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Align the CAN log to the radar's sync edges; PA − H per 8 Hz sample."""
+    """Align the CAN log to the radar's sync edges; PA − H per 8 Hz sample. The radar track
+    at full rate comes from a second pass over the recording (as ``radar-io align``)."""
     from radar_io.analysis.clock_alignment import compare_altitude, fit_clock, radar_track
     from radar_io.decoding.airdata import load_dbc, read_can_log
-    from radar_io.decoding.measurement import MeasurementBatch
+    from radar_io.decoding.batch_decoder import iter_decode
+    from radar_io.recording.rdrlog import iter_payloads
 
-    c = d.columns
-    track = radar_track([MeasurementBatch({k: c[k] for k in ("tod_s", "sync", "rx_good", "h_m",
-                                                              "x_m", "y_m")})])
+    track = radar_track(iter_decode(iter_payloads(d.source), **d.decode_options))
     log = read_can_log(can_log, load_dbc(dbc))
     fit = fit_clock(track.edge_s, log.event_time_s, log.event_count,
                     frame_period_s=track.frame_period_s)
@@ -428,3 +427,12 @@ def write_report(recording: str | os.PathLike[str], output: str | os.PathLike[st
         return info
     finally:
         rep.close()
+
+
+def report_bytes(recording: str | os.PathLike[str], fmt: str, site: Any = None,
+                 calibration: Any = None, ref_path: Any = None, spec: Any = None) -> bytes:
+    """The report as bytes (the service builds it in a worker process: plain arguments)."""
+    buf = io.BytesIO()
+    write_report(recording, buf, fmt, site=site, calibration=calibration, ref_path=ref_path,
+                 spec=spec)
+    return buf.getvalue()

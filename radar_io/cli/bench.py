@@ -33,6 +33,12 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
+    p.add_argument("--expensive-clients", type=int, default=0, metavar="N",
+                   help="also fire N concurrent flight-report requests, then N/2 sync-event "
+                   "queries, of one recording at a fresh serve: answers (429 + Retry-After "
+                   "beyond the limit), /api/status and control latency, RSS; 0 to skip")
+    p.add_argument("--expensive-recording-s", type=float, default=600.0, metavar="S",
+                   help="length of the recording those requests ask for (default 600 s)")
     p.add_argument("--core-only", action="store_true",
                    help="only the decoding paths (no service latency, no plug-in benchmarks)")
     p.set_defaults(func=run)
@@ -66,6 +72,14 @@ def run(args: argparse.Namespace) -> int:
         lines.append(f"fan-out {args.fanout_clients} clients: " + ", ".join(
             f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
             for k, v in fan.items() if not isinstance(v, (dict, list))))
+    if args.expensive_clients > 0:
+        from radar_io.benchmarks import expensive
+
+        result["expensive"] = [
+            expensive.bench_expensive(kind, n, args.expensive_recording_s)
+            for kind, n in (("report", args.expensive_clients),
+                            ("sync", max(1, args.expensive_clients // 2)))]
+        lines += [expensive.report(r) for r in result["expensive"]]
     try:
         print(json.dumps(result, indent=2) if args.json else "\n".join(lines), flush=True)
     except BrokenPipeError:  # `radar-io bench --json | head`: the reader left, stop quietly

@@ -3,9 +3,10 @@
 air data) start and stop in the lifespan.
 
 Routers, one per concern (``service/routers/``): status, live (track, ws, site, path,
-airdata), recordings, series (look-back), replay, calibration, coordinates, runway, alarms, report. Errors: one body shape, radar_io
-errors mapped by class (:mod:`radar_io.service.errors`). Origin, header and body limits:
-:mod:`radar_io.service.guard`.
+airdata), recordings, series (look-back), replay, calibration, coordinates, runway, alarms,
+report. Errors: one body shape, radar_io errors mapped by class
+(:mod:`radar_io.service.errors`). Host and Origin checks, header and body limits:
+:mod:`radar_io.service.guard`; expensive requests: :mod:`radar_io.service.limits`.
 """
 
 from __future__ import annotations
@@ -71,7 +72,7 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
 
     app = FastAPI(title="radar_io", version=__version__, lifespan=lifespan,
                   docs_url=None, redoc_url=None,  # /docs from vendored files (works offline)
-                  responses=responses(403, 413, 422, 431),
+                  responses=responses(403, 413, 421, 422, 431),
                   description="Live tracking-radar data, recordings, replay and calibration. "
                   "Units: metres and degrees; field names carry their unit. Control "
                   "endpoints need `Authorization: Bearer <token>`. Every error answers "
@@ -102,7 +103,8 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     app.add_middleware(GuardMiddleware, allowed_origins=cfg.allowed_origins,
                        max_header_bytes=cfg.max_header_kb << 10,
                        max_body_bytes=cfg.max_body_kb << 10,
-                       body_limits={"/api/runway": cfg.max_upload_mb << 20})
+                       body_limits={"/api/runway": cfg.max_upload_mb << 20},
+                       allowed_hosts=cfg.allowed_hosts, bound_host=cfg.host)
     return app
 
 

@@ -2,7 +2,9 @@
 
 Every field is validated on its own (type, range, choice); an unknown key, a wrong type
 or a value out of range is refused in one line naming the file and the field
-(:class:`~radar_io.errors.ConfigError`; ``serve`` exits 2).
+(:class:`~radar_io.errors.ConfigError`; ``serve`` exits 2); the value is quoted, except
+for a key named like a secret (:func:`is_secret_name`). A source URL of an unknown scheme
+is refused here too.
 
 The control token comes from the environment variable ``RADAR_IO_TOKEN`` or
 from the file named by ``token_file``; there is never a default token. With no
@@ -49,6 +51,12 @@ class ServiceConfig:
     max_replays: Annotated[int, Ge(0), Le(64)] = 4  #: replay sessions at once (429 beyond)
     replay_idle_s: Annotated[float, Gt(0.0), Le(86400.0)] = 300.0  #: a session nobody watches ends
     allowed_origins: list[str] = field(default_factory=list)  #: besides the same host
+    #: Host names served besides loopback and the bound address ("*": no Host check)
+    allowed_hosts: list[str] = field(default_factory=list)
+    max_reports: Annotated[int, Ge(1), Le(64)] = 2         #: reports built at once (429 beyond)
+    max_sync_queries: Annotated[int, Ge(1), Le(64)] = 4    #: a recording's sync events at once
+    max_downloads: Annotated[int, Ge(1), Le(256)] = 4      #: recording downloads at once
+    max_series_queries: Annotated[int, Ge(1), Le(64)] = 4  #: series queries at once
     max_body_kb: Annotated[int, Ge(1), Le(1 << 20)] = 1024    #: JSON bodies (413 beyond)
     max_upload_mb: Annotated[int, Ge(1), Le(1 << 16)] = 512   #: /api/runway uploads
     max_header_kb: Annotated[int, Ge(1), Le(1024)] = 16       #: all request headers (431 beyond)
@@ -85,10 +93,22 @@ class ServiceConfig:
                 tok = Path(self.token_file).read_text(encoding="utf-8").strip()
             except OSError as exc:
                 raise ConfigError(f"cannot read token file {self.token_file}: {exc.strerror}") from exc
+            except UnicodeDecodeError:  # not chained: the error holds bytes of the token
+                raise ConfigError(f"token file {self.token_file} is not UTF-8 text") from None
             if not tok:
                 raise ConfigError(f"token file {self.token_file} is empty")
             return tok
         return None
+
+
+#: a config key whose name holds one of these words has a secret value: never echoed
+SECRET_WORDS = ("password", "token", "secret", "key")
+
+
+def is_secret_name(name: str) -> bool:
+    """Whether a key named ``name`` holds a secret (its value is never put in a message)."""
+    low = name.lower()
+    return any(w in low for w in SECRET_WORDS)
 
 
 def _validate(doc: dict[str, Any], where: str) -> ServiceConfig:
@@ -106,8 +126,17 @@ def _validate(doc: dict[str, Any], where: str) -> ServiceConfig:
     except pydantic.ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
+        if is_secret_name(loc):  # not chained either: pydantic's own text holds the value
+            raise ConfigError(f"{where}: field {loc!r}: {err['msg']} (value withheld)") \
+                from None
         raise ConfigError(f"{where}: field {loc!r}: {err['msg']} (got {err.get('input')!r})") \
             from exc
+    from radar_io.sources import check_source_url
+
+    try:
+        check_source_url(cfg.source)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: field 'source': {exc}") from exc
     if cfg.can is not None and ":" not in cfg.can:
         raise ConfigError(f"{where}: field 'can': expected 'interface:channel', e.g. "
                           f"socketcan:can0 (got {cfg.can!r})")

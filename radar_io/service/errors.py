@@ -31,7 +31,7 @@ STATUS_BY_CLASS: tuple[tuple[type[RadarIOError], int, str], ...] = (
 
 _TYPE_BY_STATUS = {400: "bad_request", 401: "unauthorized", 403: "forbidden", 404: "not_found",
                    405: "method_not_allowed", 409: "conflict", 410: "gone", 413: "payload_too_large",
-                   422: "validation_error", 429: "too_many_requests",
+                   421: "host_not_allowed", 422: "validation_error", 429: "too_many_requests",
                    431: "request_header_fields_too_large", 503: "unavailable",
                    507: "insufficient_storage"}
 
@@ -98,7 +98,9 @@ def responses(*codes: int) -> dict[int | str, dict[str, Any]]:
     text = {401: "no token given", 403: "control disabled, wrong token or foreign Origin",
             404: "not found", 409: "conflicts with the current state",
             410: "gone: the route was replaced (the message names its successor)",
-            413: "request body too large", 422: "invalid request",
-            429: "too many clients or jobs", 431: "request headers too large",
+            413: "request body too large", 421: "Host not allowed (allowed_hosts)",
+            422: "invalid request",
+            429: "too many clients, jobs or expensive requests at once (Retry-After)",
+            431: "request headers too large",
             503: "a device or link is not available", 507: "no space left for the recording"}
     return {c: {"model": ErrorBody, "description": text.get(c, "error")} for c in codes}

@@ -35,6 +35,7 @@ from radar_io.service.hub import Hub
 from radar_io.service.pipeline import Pipeline, Processor
 from radar_io.service.sessions import ReplaySessions
 from radar_io.sources import source_kind
+from radar_io.service.limits import KIND_KEYS, ExpensiveLimiter
 from radar_io.wirespec.frame import load_spec
 
 log = logging.getLogger("radar_io.service")
@@ -84,6 +85,8 @@ class ServiceState:
                 raise ConfigError(f"archive_dir: cannot create {cfg.archive_dir}: "
                                   f"{exc.strerror}") from exc
         self.runway_jobs: Any = None  # RunwayJobs, created by the runway router on first use
+        #: reports, sync-event queries, downloads, series: bounded, on their own pool
+        self.limits = ExpensiveLimiter({k: getattr(cfg, key) for k, key in KIND_KEYS.items()})
         #: the live pipeline: the one with the recorder, sinks, alarms, sync index and MQTT;
         #: ``serve --source replay://`` marks its messages ``"replay": true``
         ground_replay = source_kind(cfg.source) == "replay"
@@ -210,6 +213,7 @@ class ServiceState:
             steps.append(("archiver", lambda: self.archiver.close(sd.left_s())))
         if self.runway_jobs is not None:  # cancel runway jobs, remove their spool files
             steps.append(("runway jobs", lambda: self.runway_jobs.close(sd.left_s())))
+        steps.append(("expensive requests", self.limits.close))
         steps += [(f"sink {n}", w.close) for n, w in self.sinks.items()]
         if self.mqtt is not None:
             steps.append(("mqtt", self.mqtt.close))  # last word on PREFIX/status: offline
@@ -269,6 +273,7 @@ class ServiceState:
         st["uplink"] = {k: w.stats() for k, w in self.sinks.items()}
         st["publish"] = {"mqtt": self.mqtt.stats()} if self.mqtt is not None else {}
         st["airdata"] = self.air.stats() if self.air is not None else None
+        st["expensive"] = self.limits.stats()
         return st
 
 

@@ -146,11 +146,14 @@ def test_recordings_list_download_404_and_traversal(svc):
     with urllib.request.urlopen(f"{svc.base}/api/recordings/{rec}", timeout=10) as r:
         body = r.read()
     assert body == (svc.data / "recordings" / f"{rec}.rdrlog").read_bytes()
+    # the download's limiter slot is back once it was sent
+    assert svc.get("/api/status")["expensive"]["downloads"] == {"running": 0, "limit": 4,
+                                                                 "refused": 0}
     assert call(svc, "GET", "/api/recordings/nope")[0] == 404
     for bad in ("..%2F..%2Fetc%2Fpasswd", "a..b", "%2Fetc%2Fpasswd"):
         code, _ = call(svc, "GET", f"/api/recordings/{bad}")
         assert code in (404, 422), bad  # a bad id is a validation error (422)
-    events = svc.get(f"/api/sync-events?recording={rec}")
+    events = svc.get(f"/api/sync-events?recording={rec}", 60)  # the first starts a worker
     assert events and all(e["recording"] == rec for e in events)
     assert all(b["tod_s"] - a["tod_s"] == pytest.approx(1.0, abs=0.002)
                for a, b in zip(events, events[1:]))
@@ -274,7 +277,7 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
         edges = [0] + edges
     usable = [(k, i) for k, i in enumerate(edges) if b["rx_good"][i] and i > 0][:3]
     assert len(usable) >= 2
-    listed = svc.get(f"/api/sync-events?recording={rec}")
+    listed = svc.get(f"/api/sync-events?recording={rec}", 60)
     assert [e["seq"] for e in listed] == [int(b["seq"][i]) for i in edges]
     obs = []
     for k, i in usable:
@@ -306,7 +309,7 @@ def test_dashboard_calibration_panel_estimates_and_applies(svc, tmp_path):
     rec = call(svc, "POST", "/api/recordings/start")[1]["recording"]
     time.sleep(2.6)
     call(svc, "POST", "/api/recordings/stop")
-    events = [e for e in svc.get(f"/api/sync-events?recording={rec}") if e["rx_good"]][:2]
+    events = [e for e in svc.get(f"/api/sync-events?recording={rec}", 60) if e["rx_good"]][:2]
     assert len(events) == 2
     rows = ["group,recording,sync_index,photo_sr_m,photo_el_deg,photo_az_deg"]
     for e in events:

@@ -1,11 +1,13 @@
 """Hostile pages and hostile requests against a real ``radar-io serve`` on port 0:
-foreign Origins, oversized headers and bodies, control without the token, too many
-websocket clients; and the batched websocket stream."""
+DNS rebinding (foreign Host), foreign Origins, oversized headers and bodies (also
+chunked), control without the token, too many websocket clients; and the batched
+websocket stream."""
 
 from __future__ import annotations
 
 import asyncio
 import json
+import socket
 import urllib.error
 import urllib.request
 
@@ -23,6 +25,7 @@ def svc(tmp_path_factory):
     d = tmp_path_factory.mktemp("hostile")
     cfg = d / "serve.toml"
     cfg.write_text('ws_max_clients = 3\nallowed_origins = ["https://radar.example.org"]\n'
+                   'allowed_hosts = ["radar-gs.local"]\n'
                    'max_body_kb = 64\nmax_header_kb = 8\nauto_record = "manual"\n')
     s = ServeProcess("sim://", d / "data", extra=("--config", str(cfg)),
                      env={"RADAR_IO_TOKEN": TOKEN})
@@ -66,6 +69,63 @@ def test_a_foreign_origin_cannot_open_the_live_websocket(svc):
             assert "msg_seq" in json.loads(await ws.recv())
 
     asyncio.run(main())
+
+
+def test_a_rebinding_host_is_refused_on_http_and_the_websocket(svc):
+    """A page at http://rebind.example:PORT whose name now resolves to 127.0.0.1 is
+    same-origin with itself (Origin == Host): the Host check refuses it."""
+    evil = f"rebind.example:{svc.port}"
+    for path in ("/api/status", "/api/track", "/api/recordings", "/api/sync-events"):
+        for origin in ({"Origin": f"http://{evil}"}, {}):
+            code, _, doc = request(svc, "GET", path, headers={"Host": evil, **origin})
+            assert code == 421 and "rebind.example" in reasons(doc), (path, code, doc)
+            assert doc["detail"][0]["type"] == "host_not_allowed"
+    for host in (f"127.0.0.1:{svc.port}", f"localhost:{svc.port}", f"[::1]:{svc.port}",
+                 "LOCALHOST", f"radar-gs.local:{svc.port}"):
+        code, _, doc = request(svc, "GET", "/api/status", headers={"Host": host,
+                                                                   "Origin": f"http://{host}"})
+        assert code == 200 and doc["connected"], host
+
+    async def ws(host: str) -> int:
+        sock = socket.create_connection(("127.0.0.1", svc.port))  # the name "resolves" here
+        try:
+            async with websockets.connect(f"ws://{host}/ws/live", sock=sock,
+                                          origin=f"http://{host}") as conn:
+                assert "msg_seq" in json.loads(await conn.recv())
+                return 101
+        except InvalidStatus as exc:
+            return exc.response.status_code
+
+    assert asyncio.run(ws(evil)) == 421
+    assert asyncio.run(ws(f"radar-gs.local:{svc.port}")) == 101
+
+
+def test_a_chunked_body_over_the_limit_is_413_on_every_route(svc):
+    """No Content-Length: the guard counts the chunks and answers 413 itself, whatever the
+    route does with the body it no longer gets (it used to be 400 on JSON routes)."""
+    piece = b" " * 8192
+    chunk = f"{len(piece):x}\r\n".encode() + piece + b"\r\n"
+    for method, path in (("POST", "/api/coordinates/runway-to-radar"),
+                         ("PUT", "/api/calibration"), ("POST", "/api/replay"),
+                         ("POST", "/api/alarms/x/ack"), ("POST", "/api/runway/manual")):
+        s = socket.create_connection(("127.0.0.1", svc.port), timeout=10)
+        try:
+            s.sendall(f"{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{svc.port}\r\n"
+                      f"Authorization: Bearer {TOKEN}\r\nContent-Type: application/json\r\n"
+                      "Transfer-Encoding: chunked\r\n\r\n".encode() + chunk * 9
+                      + b"0\r\n\r\n")  # 72 KiB > max_body_kb = 64
+            data = b""
+            while b"\r\n\r\n" not in data or not data.rstrip().endswith(b"}"):
+                more = s.recv(65536)
+                if not more:
+                    break
+                data += more
+        finally:
+            s.close()
+        head, _, body = data.partition(b"\r\n\r\n")
+        assert head.split()[1] == b"413", (method, path, data[:300])
+        assert "65536" in reasons(json.loads(body)), (method, path)
+    assert request(svc, "GET", "/api/status")[0] == 200
 
 
 def test_oversized_headers_431_and_bodies_413(svc):
@@ -128,3 +188,26 @@ def test_batch_stream_sends_arrays_and_extra_clients_are_refused(svc):
     assert code == 1013
     st = json.loads(urllib.request.urlopen(svc.base + "/api/status", timeout=5).read())
     assert st["ws_refused"] >= 1
+
+
+def test_host_policy_and_the_origins_host():
+    """Which Host names pass, by bind address and allowed_hosts; an Origin equal to a Host
+    that is not allowed does not pass either (the rebinding case at the Origin check)."""
+    from radar_io.service.guard import HostPolicy, origin_allowed
+
+    local = HostPolicy([], "127.0.0.1")
+    assert all(local.allows(h) for h in ("127.0.0.1:8000", "LOCALHOST:1", "[::1]:8000",
+                                         "localhost.", "::1"))
+    assert not any(local.allows(h) for h in ("rebind.example:8000", "192.168.1.20:8000",
+                                             "127.0.0.2", "[::2]:80", ""))
+    lan = HostPolicy(["radar-gs.local"], "0.0.0.0")  # all interfaces: any address, and names listed
+    assert lan.allows("192.168.1.20:8000") and lan.allows("[fe80::1]:8000")
+    assert lan.allows("Radar-GS.local:8000") and not lan.allows("rebind.example")
+    bound = HostPolicy([], "192.168.1.20")
+    assert bound.allows("192.168.1.20:8000") and not bound.allows("10.0.0.1:8000")
+    assert HostPolicy(["*"]).allows("anything.example")
+    evil = "rebind.example:8000"
+    assert not origin_allowed(f"http://{evil}", evil, frozenset(), local)
+    assert origin_allowed("http://127.0.0.1:8000", "127.0.0.1:8000", frozenset(), local)
+    assert origin_allowed("https://radar.example.org/", evil, frozenset({"https://radar.example.org"}),
+                          local)

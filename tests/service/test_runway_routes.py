@@ -181,7 +181,7 @@ def read_response(s: socket.socket) -> tuple[int, dict]:
 
 def test_declared_oversize_body_is_refused_before_it_is_sent(svc):
     size = (LIMIT_MB << 20) + 1
-    s = raw_http(svc, f"POST {Q} HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+    s = raw_http(svc, f"POST {Q} HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {TOKEN}\r\n"
                       f"Content-Type: image/png\r\nContent-Length: {size}\r\n\r\n")
     try:
         code, doc = read_response(s)  # not one body byte sent
@@ -191,7 +191,7 @@ def test_declared_oversize_body_is_refused_before_it_is_sent(svc):
 
 
 def test_streamed_oversize_body_is_refused_while_reading(svc):
-    s = raw_http(svc, f"POST {Q} HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+    s = raw_http(svc, f"POST {Q} HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {TOKEN}\r\n"
                       "Content-Type: video/mp4\r\nTransfer-Encoding: chunked\r\n\r\n")
     piece = b"\x00" * (1 << 20)
     chunk = f"{len(piece):x}\r\n".encode() + piece + b"\r\n"
@@ -219,7 +219,7 @@ def test_queue_full_429_and_cancel(svc, long_video):
         assert code == 202, doc
         jobs.append(doc["job"])
     # a fourth: 429, answered from the headers, before the body is sent
-    s = raw_http(svc, f"POST {Q} HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+    s = raw_http(svc, f"POST {Q} HTTP/1.1\r\nHost: 127.0.0.1\r\nAuthorization: Bearer {TOKEN}\r\n"
                       f"Content-Type: video/x-msvideo\r\nContent-Length: {len(long_video)}\r\n\r\n")
     try:
         code, doc = read_response(s)

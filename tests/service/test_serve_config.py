@@ -81,3 +81,56 @@ def test_the_example_config_has_every_key_and_each_is_valid(tmp_path):
     shown = set(re.findall(r"^([a-z_]+) = ", on, flags=re.M)) | {"alarms"}
     assert keys <= shown, sorted(keys - shown)
     assert cfg.publish.startswith("mqtts://") and cfg.alarms[0]["column"] == "dz_m"
+
+
+SECRET = "s3cr3t-Hunter2-do-not-print"
+
+
+@pytest.mark.parametrize("text,field", [
+    (f'mqtt_password = ["{SECRET}"]\n', "mqtt_password"),
+    (f"mqtt_password = {{ value = \"{SECRET}\" }}\n", "mqtt_password"),
+    (f'token_file = ["{SECRET}"]\n', "token_file"),
+])
+def test_a_bad_secret_value_is_named_but_never_echoed(tmp_path, text, field):
+    cfg = tmp_path / "serve.toml"
+    cfg.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_config(str(cfg), {})
+    assert field in str(e.value) and SECRET not in str(e.value) and e.value.__cause__ is None
+    r = serve(tmp_path, "--config", str(cfg))
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert str(cfg) in lines[0] and field in lines[0] and "withheld" in lines[0]
+    assert SECRET not in r.stderr + r.stdout
+
+
+def test_the_token_file_content_is_never_printed(tmp_path):
+    bad = tmp_path / "token.bin"
+    bad.write_bytes(SECRET.encode() + b"\xff\xfe")  # not UTF-8: refused without its bytes
+    r = serve(tmp_path, "--token-file", str(bad), "--source", "nope://x")
+    assert r.returncode == 2 and SECRET not in r.stderr + r.stdout
+    r = serve(tmp_path, "--token-file", str(bad))
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2 and len(lines) == 1 and str(bad) in lines[0] and "UTF-8" in lines[0]
+    assert SECRET not in r.stderr + r.stdout and "\\x" not in r.stderr
+
+
+@pytest.mark.parametrize("source", ["foo://x", "ftp://host/radar", "Sim2://"])
+def test_an_unknown_source_scheme_is_refused_at_start(tmp_path, source):
+    r = serve(tmp_path, "--source", source)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert "'source'" in lines[0] and "unknown URL scheme" in lines[0]
+    assert repr(source.split(":")[0].lower()) in lines[0]
+
+
+def test_known_schemes_and_device_paths_pass_the_source_check():
+    from radar_io.sources import check_source_url
+
+    for url in ("sim://", "replay://x.rdrlog?speed=2", "loop://", "socket://127.0.0.1:7",
+                "rfc2217://h:1", "spy://loop://", "hwgrep://ttyUSB", "alt://loop://",
+                "/dev/ttyUSB0?baudrate=115200", "/dev/serial/by-path/pci-0000:00:14.0-usb-0:1",
+                "COM3"):
+        check_source_url(url)
+    with pytest.raises(ConfigError, match="unknown URL scheme 'http'"):
+        check_source_url("http://127.0.0.1/")

@@ -245,7 +245,8 @@ def test_low_space_warning(tmp_path):
 
 
 def test_twenty_downloads_of_an_open_recording(tmp_path):
-    svc = FaultyServe("sim://", tmp_path, "auto_record = \"always\"\n")
+    # twenty at once: the downloads limit (default 4, 429 beyond) raised for this test
+    svc = FaultyServe("sim://", tmp_path, "auto_record = \"always\"\nmax_downloads = 20\n")
     try:
         svc.wait_ready()
         rec = wait_for(lambda: svc.get("/api/status")["recording"], what="recording")

@@ -15,7 +15,7 @@ from radar_io.errors import NotFoundError
 from radar_io.service.errors import responses
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
-from radar_io.service.routers.deps import get_state
+from radar_io.service.routers.deps import get_state, service_of
 from radar_io.service.state import ServiceState
 
 router = APIRouter(tags=["live"])
@@ -103,5 +103,5 @@ async def ws_live(ws: WebSocket, from_: int | None = Query(None, alias="from", g
                   ) -> None:
     """Live messages: one JSON object per frame, or arrays with ``batch=1``; ``from=N``
     resumes after msg_seq N; ``max_hz`` decimates. Beyond ``ws_max_clients``: closed 1013."""
-    state: ServiceState = get_state(ws)
+    state: ServiceState = service_of(ws)
     await serve_stream(ws, state.hub, state.history, from_, max_hz, batch)

@@ -13,7 +13,7 @@ from pydantic import BaseModel, Field
 
 from radar_io.errors import NotFoundError
 from radar_io.service.errors import error_response, responses
-from radar_io.service.routers.deps import CONTROL, get_state
+from radar_io.service.routers.deps import CONTROL, get_state, service_of
 from radar_io.service.routers.live import serve_stream
 from radar_io.service.sessions import ReplaySession, SessionLimit
 from radar_io.service.state import ID_PATTERN, ServiceState
@@ -139,7 +139,7 @@ async def ws_replay(ws: WebSocket, sid: str, from_: int | None = Query(None, ali
                     ) -> None:
     """A session's messages, in the live protocol (``from=``, ``max_hz``, ``batch=1``); each
     carries its recorded ``t_ns`` and ``"replay": id``. An unknown id: closed 4404."""
-    state: ServiceState = get_state(ws)
+    state: ServiceState = service_of(ws)
     try:
         s = state.replays.get(sid)
     except NotFoundError as exc:

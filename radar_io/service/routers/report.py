@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import io
-import threading
 from typing import Literal
 
 from fastapi import APIRouter, Depends, Path, Query
@@ -15,26 +13,23 @@ from radar_io.service.routers.deps import get_state
 from radar_io.service.state import ID_PATTERN, ServiceState
 
 router = APIRouter(tags=["recordings"])
-#: matplotlib's pyplot state is process-wide: one report is drawn at a time
-_REPORT_LOCK = threading.Lock()
 
 
 @router.get("/api/recordings/{rec_id}/report",
             responses={200: {"content": {"text/html": {}, "application/pdf": {}}},
-                       **responses(404, 422)})
-def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
-           format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
-           state: ServiceState = Depends(get_state)) -> Response:
+                       **responses(404, 422, 429, 503)})
+async def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+                 format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
+                 state: ServiceState = Depends(get_state)) -> Response:
     """Self-contained HTML (figures embedded) or a PDF, built on request (a few seconds for
-    a 10-minute recording)."""
-    from radar_io.analysis.report import write_report
+    a 10-minute recording) in a worker process. At most ``max_reports`` at once (429 with
+    Retry-After beyond)."""
+    from radar_io.analysis.report import report_bytes
 
     path = state.recording_path(rec_id)
-    buf = io.BytesIO()
-    with _REPORT_LOCK:
-        write_report(path, buf, format, site=state.site, calibration=state.live.calibration,
-                     ref_path=state.path, spec=state.spec)
+    body = await state.limits.run("reports", report_bytes, path, format, state.site,
+                                  state.live.calibration, state.path, state.spec)
     if format == "pdf":
-        return Response(buf.getvalue(), media_type="application/pdf", headers={
+        return Response(body, media_type="application/pdf", headers={
             "Content-Disposition": f'attachment; filename="{rec_id}-report.pdf"'})
-    return Response(buf.getvalue(), media_type="text/html; charset=utf-8")
+    return Response(body, media_type="text/html; charset=utf-8")

@@ -4,28 +4,26 @@ column and the recording's events, from the recording's look-back index
 
 from __future__ import annotations
 
+import functools
 import json
 import time
+from collections.abc import Callable
 from typing import Any
 
 from fastapi import APIRouter, Depends, Path, Query
 from fastapi.responses import Response
 from pydantic import BaseModel, ConfigDict, Field
-from starlette.requests import HTTPConnection
+from starlette.requests import HTTPConnection, Request
 
 from radar_io.analysis.series import query_events, query_series
 from radar_io.service.errors import responses
 from radar_io.service.lookback import LookBack
+from radar_io.service.routers.deps import service_of
 from radar_io.service.state import ID_PATTERN
 
 router = APIRouter(tags=["recordings"])
 
-#: dependencies of the expensive look-back requests: the per-kind limiter (kind "series",
-#: 429 + Retry-After) is attached here, for both routes. Each route's work is one call of
-#: plain, picklable data (``query_series`` / ``query_events``), so it can as well be handed
-#: to a limiter's worker pool or process as it is.
-EXPENSIVE: list[Any] = []
-_ERRORS = responses(404, 422, 429, 507)
+_ERRORS = responses(404, 422, 429, 503, 507)
 COLUMNS_PATTERN = r"^[A-Za-z0-9_]+(,[A-Za-z0-9_]+)*$"
 
 
@@ -56,23 +54,27 @@ class EventsAnswer(BaseModel):
     events: list[Event]
 
 
-def get_lookback(conn: HTTPConnection) -> LookBack:
+async def get_lookback(conn: HTTPConnection) -> LookBack:
     """The look-back indexes of the app serving this request."""
     return conn.app.state.lookback  # type: ignore[no-any-return]
 
 
-def _json(doc: dict[str, Any], t0: float, cpu0: float) -> Response:
-    """The JSON answer, with its cost in a ``Server-Timing`` header: ``total`` (wall ms,
-    index update included) and ``cpu`` (this worker thread's CPU ms)."""
+async def _limited(conn: HTTPConnection, fn: Callable[..., dict[str, Any]],
+                   **kwargs: Any) -> Response:
+    """``fn(**kwargs)`` (plain, picklable data) within the expensive-request limit of kind
+    "series" (429 + Retry-After beyond ``max_series_queries``; a worker process, never the
+    loop or the pool the control routes use), as JSON with its wall time in a
+    ``Server-Timing`` header (``total``, ms, index update included)."""
+    t0 = time.perf_counter()
+    doc = await service_of(conn).limits.run("series", functools.partial(fn, **kwargs))
     body = json.dumps(doc, separators=(",", ":"), allow_nan=False)
-    timing = (f"total;dur={(time.perf_counter() - t0) * 1e3:.2f}, "
-              f"cpu;dur={(time.thread_time() - cpu0) * 1e3:.2f}")
+    timing = f"total;dur={(time.perf_counter() - t0) * 1e3:.2f}"
     return Response(body, media_type="application/json", headers={"Server-Timing": timing})
 
 
-@router.get("/api/recordings/{rec_id}/series", dependencies=EXPENSIVE, response_model=None,
+@router.get("/api/recordings/{rec_id}/series", response_model=None,
             responses={200: {"model": SeriesAnswer}, **_ERRORS})
-def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+async def series(request: Request, rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
            columns: str = Query(pattern=COLUMNS_PATTERN, max_length=2000,
                                 description="comma-separated column names, e.g. h_m,dy_m"),
            start_s: float | None = Query(None, ge=0.0, allow_inf_nan=False,
@@ -88,18 +90,20 @@ def series(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
     [start, next start), the last one closed), `t_s` their starts, min / max over the
     non-null samples of each (null: no value). Otherwise every frame (min = max). The
     first query of a recording builds its index (docs/lookback.md)."""
-    t0, cpu0 = time.perf_counter(), time.thread_time()
-    doc = query_series(columns=columns.split(","), start_s=start_s, end_s=end_s, points=points,
-                       **lookback.request(rec_id))
-    return _json(doc, t0, cpu0)
+    return await _limited(request, query_series, columns=columns.split(","), start_s=start_s,
+                          end_s=end_s, points=points, **lookback.request(rec_id))
 
 
-@router.get("/api/recordings/{rec_id}/events", dependencies=EXPENSIVE, response_model=None,
+@router.get("/api/recordings/{rec_id}/events", response_model=None,
             responses={200: {"model": EventsAnswer}, **_ERRORS})
-def events(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
+async def events(request: Request, rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
            lookback: LookBack = Depends(get_lookback)) -> Response:
     """GO edges (`go`, `edge` rise / fall) and SYNC 0→1 edges (`sync`), each with `seq` and
     `tod_s`, found in the recording's frames, and the other records of its event log
     (alarms, clock steps, annotations), by time on the series' axis."""
-    t0, cpu0 = time.perf_counter(), time.thread_time()
-    return _json({"events": query_events(**lookback.request(rec_id))}, t0, cpu0)
+    return await _limited(request, _events_doc, **lookback.request(rec_id))
+
+
+def _events_doc(**kwargs: Any) -> dict[str, Any]:
+    """``{"events": [...]}`` of :func:`query_events` (module level: it runs in a worker)."""
+    return {"events": query_events(**kwargs)}
