@@ -165,8 +165,8 @@ def _output(seq: np.ndarray, tod: np.ndarray, state: np.ndarray, cov: np.ndarray
         "seq": seq, "tod_s": np.asarray(tod, dtype=np.float64),
         "x_m": state[:, 0], "y_m": state[:, 1], "h_m": state[:, 2],
         "vx_mps": vx, "vy_mps": vy, "vh_mps": vh}
-    for i, c in enumerate(TRACK_COLUMNS[8:17]):
-        cols[c] = cov[:, i].astype(np.float64)
+    for i, c in enumerate(TRACK_COLUMNS[8:17]):  # float32: σ to 7 digits, half the memory
+        cols[c] = np.ascontiguousarray(cov[:, i], dtype=np.float32)
     cols["gs_mps"] = gs
     cols["vs_mps"] = vh
     cols["track_deg"] = np.mod(np.degrees(np.arctan2(vy, vx)), 360.0)
@@ -246,7 +246,7 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
             nis, flags = np.empty(n), np.empty(n, dtype=np.uint8)
             fx, fP = np.empty((n, 6)), np.empty((n, 6, 6))
             fwd.run(m, 0, n, nis, flags, fx, fP)
-            cov = np.empty((n, 9))
+            cov = np.empty((n, 9), dtype=np.float32)
             fwd.K.covariance_columns(fP, np.arange(n), cov)
             summary.add(nis, flags, m[4])
             yield _output(b["seq"], b["tod_s"], fx, cov, nis, flags, site, path, stats)
@@ -311,5 +311,5 @@ def track_batch(batch: MeasurementBatch, params: TrackParams | None = None, *,
     if len(out) == 1:
         return out[0]
     return MeasurementBatch.concat(out) if out else _output(
-        np.empty(0, dtype=np.int64), np.empty(0), np.empty((0, 6)), np.empty((0, 9)),
+        np.empty(0, dtype=np.int64), np.empty(0), np.empty((0, 6)), np.empty((0, 9), dtype=np.float32),
         np.empty(0), np.empty(0, dtype=np.uint8), site, path, batch.stats)
