@@ -23,6 +23,10 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--outputs-hours", type=float, default=0.0, metavar="H",
                    help="also decode an H-hour 1 kHz recording to Parquet and CSV through the "
                    "CLI beside pyarrow anchors (fresh processes, peak RSS); 0 to skip")
+    p.add_argument("--tracking-hours", type=float, default=0.0, metavar="H",
+                   help="also track an H-hour 1 kHz recording to smoothed Parquet through the "
+                   "CLI (fresh processes: first with numba compiling, then cached; peak RSS) "
+                   "beside Stone Soup's EKF + smoother per measurement; 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
@@ -42,6 +46,11 @@ def run(args: argparse.Namespace) -> int:
 
         result["outputs"] = outputs.run(hours=args.outputs_hours, long_hours=0.0)
         lines.append(outputs.report(result["outputs"]))
+    if args.tracking_hours > 0:
+        from radar_io.benchmarks import tracking
+
+        result["tracking"] = tracking.run(hours=args.tracking_hours)
+        lines.append(tracking.report(result["tracking"]))
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 

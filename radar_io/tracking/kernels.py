@@ -25,8 +25,9 @@ import numpy as np
 
 ACTIVE, START, UPDATED, OUTLIER = 1, 2, 4, 8
 
-#: carried forward-filter state: [t_last, t_last_update, active, restarts, time_errors]
-CARRY_LEN = 5
+#: carried forward-filter state: [t_last, t_last_update, active, tracks, time_errors,
+#: next fix, fixes used]
+CARRY_LEN = 7
 
 
 def _jit(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -78,32 +79,14 @@ def _init(x: np.ndarray, P: np.ndarray, sr: float, el: float, az: float, s_r: fl
 
 
 @_jit
-def _update(x: np.ndarray, P: np.ndarray, sr: float, el: float, az: float, s_r: float,
-            s_a: float, gate: float, H: np.ndarray, K: np.ndarray, A: np.ndarray,
-            T: np.ndarray) -> float:
-    """EKF update with NIS gating, Joseph form. Returns the NIS; x, P change only if NIS ≤ gate.
+def _apply(x: np.ndarray, P: np.ndarray, H: np.ndarray, v0: float, v1: float, v2: float,
+           gate: float, K: np.ndarray, A: np.ndarray, T: np.ndarray) -> float:
+    """Kalman update with a scaled measurement (R = I): innovation ``v``, Jacobian ``H`` (3×6)
+    whose velocity columns are zero (both measurements see the position only).
 
-    ``H`` (3×6), ``K`` (6×3), ``A``, ``T`` (6×6) are scratch arrays.
+    Returns the NIS; x and P change only if NIS ≤ gate (Joseph form). ``K`` (6×3), ``A``,
+    ``T`` (6×6) are scratch arrays.
     """
-    px, py, ph = x[0], x[1], x[2]
-    g2 = px * px + py * py
-    g = math.sqrt(g2)
-    r2 = g2 + ph * ph
-    r = math.sqrt(r2)
-    if g == 0.0:
-        return math.inf  # overhead: azimuth undefined, no linearisation
-    # scaled innovation v = (z - h(x)) / σ, azimuth difference folded into (-π, π]
-    d_az = az - math.atan2(py, px)
-    d_az = d_az - 2.0 * math.pi * math.floor((d_az + math.pi) / (2.0 * math.pi))
-    v0 = (sr - r) / s_r
-    v1 = (el - math.atan2(ph, g)) / s_a
-    v2 = d_az / s_a
-    # scaled Jacobian H = diag(1/σ) ∂h/∂(x, y, h); velocity columns are zero
-    H[:, :] = 0.0
-    H[0, 0], H[0, 1], H[0, 2] = px / r / s_r, py / r / s_r, ph / r / s_r
-    H[1, 0], H[1, 1], H[1, 2] = (-ph * px / (r2 * g) / s_a, -ph * py / (r2 * g) / s_a,
-                                 g / r2 / s_a)
-    H[2, 0], H[2, 1] = -py / g2 / s_a, px / g2 / s_a
     # PHᵀ (6×3) into K, then S = H P Hᵀ + I
     for i in range(6):
         for m in range(3):
@@ -153,17 +136,56 @@ def _update(x: np.ndarray, P: np.ndarray, sr: float, el: float, az: float, s_r: 
 
 
 @_jit
+def _update(x: np.ndarray, P: np.ndarray, sr: float, el: float, az: float, s_r: float,
+            s_a: float, gate: float, H: np.ndarray, K: np.ndarray, A: np.ndarray,
+            T: np.ndarray) -> float:
+    """EKF update by a radar measurement (SR m, EL, AZ rad) with NIS gating; returns the NIS."""
+    px, py, ph = x[0], x[1], x[2]
+    g2 = px * px + py * py
+    g = math.sqrt(g2)
+    r2 = g2 + ph * ph
+    r = math.sqrt(r2)
+    if g == 0.0:
+        return math.inf  # overhead: azimuth undefined, no linearisation
+    # scaled innovation v = (z - h(x)) / σ, azimuth difference folded into (-π, π]
+    d_az = az - math.atan2(py, px)
+    d_az = d_az - 2.0 * math.pi * math.floor((d_az + math.pi) / (2.0 * math.pi))
+    # scaled Jacobian H = diag(1/σ) ∂h/∂(x, y, h); velocity columns are zero
+    H[:, :] = 0.0
+    H[0, 0], H[0, 1], H[0, 2] = px / r / s_r, py / r / s_r, ph / r / s_r
+    H[1, 0], H[1, 1], H[1, 2] = (-ph * px / (r2 * g) / s_a, -ph * py / (r2 * g) / s_a,
+                                 g / r2 / s_a)
+    H[2, 0], H[2, 1] = -py / g2 / s_a, px / g2 / s_a
+    return _apply(x, P, H, (sr - r) / s_r, (el - math.atan2(ph, g)) / s_a, d_az / s_a, gate,
+                  K, A, T)
+
+
+@_jit
+def _update_position(x: np.ndarray, P: np.ndarray, fix: np.ndarray, H: np.ndarray,
+                     K: np.ndarray, A: np.ndarray, T: np.ndarray) -> float:
+    """Update by a direct position fix ``[x, y, h, σx, σy, σh]`` (m); returns its NIS."""
+    H[:, :] = 0.0
+    for m in range(3):
+        H[m, m] = 1.0 / fix[3 + m]
+    return _apply(x, P, H, (fix[0] - x[0]) / fix[3], (fix[1] - x[1]) / fix[4],
+                  (fix[2] - x[2]) / fix[5], math.inf, K, A, T)
+
+
+@_jit
 def forward(t: np.ndarray, sr: np.ndarray, el: np.ndarray, az: np.ndarray, good: np.ndarray,
             i0: int, i1: int, x: np.ndarray, P: np.ndarray, carry: np.ndarray,
             params: np.ndarray, nis: np.ndarray, flags: np.ndarray,
-            out_x: np.ndarray, out_P: np.ndarray) -> None:
+            out_x: np.ndarray, out_P: np.ndarray, fix_rows: np.ndarray,
+            fixes: np.ndarray) -> None:
     """Run the filter over samples ``i0 … i1-1``, continuing from ``x``, ``P``, ``carry``.
 
     ``t`` unwrapped time (s); ``sr`` (m), ``el``, ``az`` (rad); ``good`` 0/1.
     ``params`` = [q, σ_range, σ_angle, gate, max_gap_s, v0_var]. Writes ``nis[k]``,
     ``flags[k]``, and, if ``out_x`` has rows, the filtered state and covariance of sample
     ``k`` at row ``k - i0`` of ``out_x`` / ``out_P``. ``x``, ``P``, ``carry`` hold the state
-    after sample ``i1 - 1`` on return.
+    after sample ``i1 - 1`` on return. ``fix_rows`` (ascending) / ``fixes`` (m × 6: x, y, h,
+    σx, σy, σh): position fixes applied after the radar update of their row, if the track
+    holds an estimate there.
     """
     q, s_r, s_a, gate, max_gap, v0_var = (params[0], params[1], params[2], params[3],
                                           params[4], params[5])
@@ -173,6 +195,7 @@ def forward(t: np.ndarray, sr: np.ndarray, el: np.ndarray, az: np.ndarray, good:
     A = np.empty((6, 6))
     T = np.empty((6, 6))
     t_last, t_upd, active = carry[0], carry[1], carry[2] > 0.0
+    nf = int(carry[5])
     for k in range(i0, i1):
         tk = t[k]
         f = 0
@@ -200,6 +223,11 @@ def forward(t: np.ndarray, sr: np.ndarray, el: np.ndarray, az: np.ndarray, good:
                     t_upd = tk
                 else:
                     f = OUTLIER
+        while nf < fix_rows.shape[0] and fix_rows[nf] <= k:
+            if fix_rows[nf] == k and active:
+                _update_position(x, P, fixes[nf], H, K, A, T)
+                carry[6] += 1.0
+            nf += 1
         if active:
             f |= ACTIVE
             t_last = tk
@@ -210,7 +238,7 @@ def forward(t: np.ndarray, sr: np.ndarray, el: np.ndarray, az: np.ndarray, good:
                 out_x[j, a] = x[a] if active else math.nan
                 for b in range(6):
                     out_P[j, a, b] = P[a, b] if active else math.nan
-    carry[0], carry[1], carry[2] = t_last, t_upd, 1.0 if active else 0.0
+    carry[0], carry[1], carry[2], carry[5] = t_last, t_upd, 1.0 if active else 0.0, nf
 
 
 @_jit

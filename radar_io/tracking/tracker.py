@@ -115,6 +115,8 @@ class TrackSummary:
     time_errors: int = 0
     nis_sum: float = 0.0
     nis_in_95: int = 0  #: NIS below χ²₃(0.95) = 7.815
+    fixes_used: int = 0
+    bias: Any = None    #: a :class:`~radar_io.tracking.fusion.BiasEstimate` with estimate_bias
 
     def add(self, nis: np.ndarray, flags: np.ndarray, good: np.ndarray) -> None:
         from radar_io.tracking import kernels as K
@@ -129,11 +131,18 @@ class TrackSummary:
 
     def metadata(self) -> dict[str, str]:
         n = max(self.used - self.tracks, 1)  # the first sample of a track has no NIS
-        return {"tracking.rows": str(self.rows), "tracking.measurements": str(self.measurements),
+        meta = {"tracking.rows": str(self.rows), "tracking.measurements": str(self.measurements),
                 "tracking.used": str(self.used), "tracking.outliers": str(self.outliers),
                 "tracking.tracks": str(self.tracks), "tracking.time_errors": str(self.time_errors),
                 "tracking.nis_mean": f"{self.nis_sum / n:.4f}",
-                "tracking.nis_within_chi2_95": f"{self.nis_in_95 / n:.4f}"}
+                "tracking.nis_within_chi2_95": f"{self.nis_in_95 / n:.4f}",
+                "tracking.fixes_used": str(self.fixes_used)}
+        if self.bias is not None:
+            b = self.bias
+            for k, v, sd in zip(("dsr_m", "del_deg", "daz_deg"), (b.dsr_m, b.del_deg, b.daz_deg),
+                                b.sigma):
+                meta[f"tracking.bias_{k}"] = f"{v:.6g} ± {sd:.3g}"
+        return meta
 
 
 def params_metadata(params: TrackParams, smoothed: bool) -> dict[str, str]:
@@ -205,13 +214,15 @@ class _Forward:
         self.carry = np.zeros(K.CARRY_LEN)
         self.none_x = np.empty((0, 6))
         self.none_P = np.empty((0, 6, 6))
+        self.fix_rows = np.empty(0, dtype=np.int64)
+        self.fixes = np.empty((0, 6))
 
     def run(self, m: tuple[np.ndarray, ...], i0: int, i1: int, nis: np.ndarray,
             flags: np.ndarray, out_x: np.ndarray | None = None,
             out_P: np.ndarray | None = None) -> None:
         self.K.forward(*m, i0, i1, self.x, self.P, self.carry, self.vec, nis, flags,
                        self.none_x if out_x is None else out_x,
-                       self.none_P if out_P is None else out_P)
+                       self.none_P if out_P is None else out_P, self.fix_rows, self.fixes)
 
     def checkpoint(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.x.copy(), self.P.copy(), self.carry.copy()
@@ -222,7 +233,8 @@ class _Forward:
 
 def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None = None, *,
                smooth: bool = True, site: Any = None, path: Any = None,
-               summary: TrackSummary | None = None, block_rows: int = BLOCK
+               summary: TrackSummary | None = None, block_rows: int = BLOCK,
+               fixes: Any = None, estimate_bias: bool = False
                ) -> Iterator[MeasurementBatch]:
     """Track decoded batches (in time order); yields batches of :data:`TRACK_COLUMNS`.
 
@@ -232,12 +244,21 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
     covariances are recomputed from a checkpoint, so memory is ~100 B/row, not 6×6 per
     row) and yields the result in blocks of ``block_rows`` rows. ``summary`` collects
     counts and NIS statistics.
+
+    ``fixes`` (:class:`~radar_io.tracking.fusion.Fixes`, smoother only): photo positions
+    at SYNC edges, fused as position measurements. ``estimate_bias``: first the radar-only
+    track gives ΔSR, ΔEL, ΔAZ against the fixes (``summary.bias``); the measurements are
+    then corrected by it and tracked with the fixes fused.
     """
     params = params or TrackParams()
     summary = summary if summary is not None else TrackSummary()
     fwd = _Forward(params)
     tb = TimeBase()
     stats: dict[str, int] = {}
+    if (fixes is not None or estimate_bias) and not smooth:
+        raise ConfigError("photo fixes and bias estimation need the smoother (not forward-only)")
+    if estimate_bias and fixes is None:
+        raise ConfigError("bias estimation needs photo fixes")
     if not smooth:
         for b in batches:
             stats = b.stats
@@ -252,16 +273,35 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
             yield _output(b["seq"], b["tod_s"], fx, cov, nis, flags, site, path, stats)
         summary.tracks, summary.time_errors = int(fwd.carry[3]), int(fwd.carry[4])
         return
-    keep: dict[str, list[np.ndarray]] = {c: [] for c in ("seq", "tod_s", "t", "sr", "el", "az",
-                                                         "good")}
+    names = ("seq", "tod_s", "t", "sr", "el", "az", "good") + (("sync",) if fixes is not None else ())
+    keep: dict[str, list[np.ndarray]] = {c: [] for c in names}
     for b in batches:
         stats = b.stats
         t, sr, el, az, good = _measurements(b, tb(b["tod_s"]))
         for c, v in (("seq", b["seq"]), ("tod_s", b["tod_s"]), ("t", t), ("sr", sr),
                      ("el", el), ("az", az), ("good", good)):
             keep[c].append(np.array(v, copy=True))
+        if fixes is not None:
+            keep["sync"].append(np.array(b["sync"], copy=True))
     cols = {c: (np.concatenate(v) if v else np.empty(0)) for c, v in keep.items()}
     del keep
+    if fixes is not None:
+        from radar_io.tracking import fusion
+
+        rows = fusion.fix_rows(fixes, cols.pop("sync"), fixes.source or "fixes")
+        if estimate_bias:
+            at = {int(r): j for j, r in enumerate(rows)}
+            st, cv = np.full((len(rows), 6), np.nan), np.full((len(rows), 9), np.nan)
+            for state, cov, _, _, lo, hi in smooth_arrays(cols, _Forward(params),
+                                                          TrackSummary(), block_rows):
+                for r in rows[(rows >= lo) & (rows < hi)]:
+                    st[at[int(r)]], cv[at[int(r)]] = state[r - lo], cov[r - lo]
+            summary.bias = bias = fusion.estimate_bias(fixes, st, cv)
+            cols["sr"] += bias.dsr_m
+            cols["el"] += math.radians(bias.del_deg)
+            cols["az"] += math.radians(bias.daz_deg)
+        fwd.fix_rows = np.ascontiguousarray(rows, dtype=np.int64)
+        fwd.fixes = np.ascontiguousarray(np.hstack([fixes.xyh_m, fixes.sigma_m]))
     for batch in smooth_arrays(cols, fwd, summary, block_rows):
         state, cov, nis, flags, lo, hi = batch
         yield _output(cols["seq"][lo:hi], cols["tod_s"][lo:hi], state, cov, nis, flags,
@@ -284,6 +324,7 @@ def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSumm
         fwd.run(m, lo, min(lo + B, n), nis, flags)
     summary.add(nis, flags, m[4])
     summary.tracks, summary.time_errors = int(fwd.carry[3]), int(fwd.carry[4])
+    summary.fixes_used = int(fwd.carry[6])
     state = np.empty((n, 6))
     cov = np.empty((n, 9), dtype=np.float32)
     fx, fP = np.empty((B, 6)), np.empty((B, 6, 6))
@@ -303,11 +344,14 @@ def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSumm
 
 def track_batch(batch: MeasurementBatch, params: TrackParams | None = None, *,
                 smooth: bool = True, site: Any = None, path: Any = None,
-                summary: TrackSummary | None = None) -> MeasurementBatch:
+                summary: TrackSummary | None = None, fixes: Any = None,
+                estimate_bias: bool = False) -> MeasurementBatch:
     """Track one decoded batch: one row per input row, :data:`TRACK_COLUMNS` (+ runway,
-    geodetic and path deviation with ``site`` / ``path``)."""
+    geodetic and path deviation with ``site`` / ``path``); ``fixes`` and ``estimate_bias``
+    as :func:`iter_track`."""
     out = list(iter_track([batch], params, smooth=smooth, site=site, path=path,
-                          summary=summary, block_rows=max(len(batch), 1)))
+                          summary=summary, block_rows=max(len(batch), 1), fixes=fixes,
+                          estimate_bias=estimate_bias))
     if len(out) == 1:
         return out[0]
     return MeasurementBatch.concat(out) if out else _output(
