@@ -45,6 +45,15 @@ def add_subparser(sub: Any) -> None:
                    help="no measurement used for longer ends the track (default 5)")
     p.add_argument("--forward-only", action="store_true",
                    help="the forward filter only (causal, streaming; no smoother)")
+    p.add_argument("--fixes", metavar="FIXES.csv",
+                   help="photo fixes fused as position measurements: sync_index (0-based SYNC "
+                   "0->1 edge of INPUT), photo_x_m, photo_y_m, photo_z_m (Z down), "
+                   "sigma_x_m, sigma_y_m, sigma_z_m")
+    p.add_argument("--estimate-bias", action="store_true",
+                   help="estimate the radar biases dSR, dEL, dAZ against the fixes and track "
+                   "the bias-corrected measurements")
+    p.add_argument("--bias-out", metavar="CAL.json",
+                   help="write the estimated biases as a calibration set (with --estimate-bias)")
     p.add_argument("-q", "--quiet", action="store_true", help="no summary on stderr")
     add_common(p)
     p.set_defaults(func=run)
@@ -69,6 +78,17 @@ def run(args: argparse.Namespace) -> int:
                                   max_gap_s=args.max_gap_s)
     if not os.path.isfile(args.input):
         raise ConfigError(f"input not found: {args.input}")
+    if args.forward_only and (args.fixes or args.estimate_bias):
+        raise ConfigError("--fixes and --estimate-bias need the smoother (drop --forward-only)")
+    if (args.estimate_bias or args.bias_out) and not args.fixes:
+        raise ConfigError("--estimate-bias and --bias-out need --fixes FIXES.csv")
+    if args.bias_out and not args.estimate_bias:
+        raise ConfigError("--bias-out needs --estimate-bias")
+    fixes = None
+    if args.fixes:
+        from radar_io.tracking.fusion import read_fixes
+
+        fixes = read_fixes(args.fixes)
     meta = output_metadata(common["spec"], common["site"], common["calibration"],
                            source=args.input, **params_metadata(params, not args.forward_only))
     report = ReadReport()
@@ -79,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         stats: dict[str, int] = {}
         for out in iter_track(batches, params, smooth=not args.forward_only,
-                              site=common["site"], path=path, summary=summary):
+                              site=common["site"], path=path, summary=summary, fixes=fixes,
+                              estimate_bias=args.estimate_bias):
             if not writer.rows and not args.forward_only:  # smoothed: counts known already
                 writer.metadata.update(summary.metadata())
             writer.write(out)
@@ -90,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
     except BaseException:
         writer.abort()  # no half-written output left behind
         raise
+    if args.bias_out:
+        _write_bias(args, summary.bias, common["calibration"], fixes)
     for problem in report.problems:
         print(f"radar-io track: warning: {args.input}: {problem}", file=sys.stderr)
     if not args.quiet:
@@ -97,4 +120,25 @@ def run(args: argparse.Namespace) -> int:
         print(f"radar-io track: {summary.rows} rows, {summary.measurements} measurements, "
               f"{summary.used} used, {summary.outliers} outliers, {summary.tracks} track(s), "
               f"NIS mean {m['tracking.nis_mean']} (3 expected)", file=sys.stderr)
+        if summary.bias is not None:
+            print("radar-io track: bias " + ", ".join(
+                f"{k} {m[f'tracking.bias_{k}']}" for k in ("dsr_m", "del_deg", "daz_deg"))
+                + f" from {summary.bias.fixes_used} fixes", file=sys.stderr)
     return 0
+
+
+def _write_bias(args: argparse.Namespace, bias: Any, base: Any, fixes: Any) -> None:
+    """The estimate as a calibration set: biases = the input's calibration + the estimate."""
+    from pathlib import Path
+
+    from radar_io.decoding.biases import Calibration, save_calibration, utc_now_iso
+
+    stats = bias.statistics(base)
+    cal = Calibration(
+        dsr_m=stats["dsr_m"]["estimate"], del_deg=stats["del_deg"]["estimate"],
+        daz_deg=stats["daz_deg"]["estimate"], id=f"track-{Path(args.input).stem}",
+        created_utc=utc_now_iso(), statistics=stats,
+        provenance={"tool": "radar-io track --estimate-bias", "method": stats["method"],
+                    "input": Path(args.input).name, "fixes": Path(args.fixes).name,
+                    "fixes_sha256": fixes.sha256})
+    save_calibration(cal, args.bias_out)

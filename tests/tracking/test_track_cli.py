@@ -74,3 +74,77 @@ def test_bad_input_is_one_line_and_exit_2(recording, tmp_path, args, message):
     if "site" in message:
         assert str(bad) in err
     assert not (tmp_path / "x.parquet").exists()
+
+
+def test_fixes_estimate_bias_and_bias_out(tmp_path):
+    """Biases injected through the decoder's calibration set; 18 photo fixes of σ 2 m."""
+    import csv
+    import json
+
+    from radar_io.simulation.radar import RadarSimulator, SimConfig
+
+    sim = RadarSimulator(config=SimConfig(tod_start_s=50_000.0, seed=9, ng_per_min=0.0))
+    data, truth = sim.generate(92_000)
+    raw = tmp_path / "flight.bin"
+    raw.write_bytes(data)
+    injected = {"dsr_m": -12.5, "del_deg": 0.334, "daz_deg": 1.135}  # readings = truth + these
+    cal = tmp_path / "cal.json"
+    cal.write_text(json.dumps({"format": "radar_io-calibration/1", "id": "wrong",
+                               "biases": injected}))
+    s = truth["sync"].astype(np.int8)
+    rows = np.flatnonzero((s == 1) & (np.concatenate(([0], s[:-1])) == 0))
+    assert rows.size == 18
+    rng = np.random.default_rng(4)
+    fixes = tmp_path / "fixes.csv"
+    with open(fixes, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["sync_index", "photo_x_m", "photo_y_m", "photo_z_m", "sigma_x_m",
+                    "sigma_y_m", "sigma_z_m"])
+        for i, r in enumerate(rows):
+            e = rng.normal(0.0, 2.0, 3)
+            w.writerow([i, truth["x_m"][r] + e[0], truth["y_m"][r] + e[1],
+                        -(truth["h_m"][r] + e[2]), 2, 2, 2])
+    out, cal_out = tmp_path / "bet.arrow", tmp_path / "new_cal.json"
+    r = run_cli("track", str(raw), "-o", str(out), "--calibration", str(cal), "--fixes",
+                str(fixes), "--estimate-bias", "--bias-out", str(cal_out),
+                "--sigma-range-m", "1.04", "--sigma-angle-deg", "0.005")
+    assert r.returncode == 0, r.stderr
+    assert "bias dsr_m" in r.stderr.decode()
+    doc = json.loads(cal_out.read_text())
+    st = doc["statistics"]
+    assert "method" in st and doc["provenance"]["fixes"] == "fixes.csv"
+    for k, v in injected.items():
+        # the new set's totals undo the wrong calibration: ≈ 0 within 3σ
+        assert abs(doc["biases"][k]) <= 3 * st[k]["sigma"], (k, doc["biases"][k], st[k])
+        assert doc["biases"][k] == st[k]["estimate"]
+    import pyarrow as pa
+
+    with pa.ipc.open_file(out) as f:
+        meta = read_metadata(f.schema)
+        t = f.read_all()
+    assert meta["tracking.fixes_used"] == "18"
+    est = float(meta["tracking.bias_dsr_m"].split(" ± ")[0])
+    assert abs(est - 12.5) < 3 * st["dsr_m"]["sigma"] + 1e-3
+    e = np.hypot(t["x_m"].to_numpy() - truth["x_m"], t["y_m"].to_numpy() - truth["y_m"])
+    assert np.nanmedian(e[5000:]) < 2.0   # the bias-corrected track
+    # the set decodes: a later decode / track can use it
+    r = run_cli("track", str(raw), "-o", str(tmp_path / "again.csv"), "--calibration",
+                str(cal_out), "-q")
+    assert r.returncode == 0, r.stderr
+
+
+def test_fix_errors_are_one_line(recording, tmp_path):
+    bad = tmp_path / "fixes.csv"
+    bad.write_text("sync_index,photo_x_m,photo_y_m,photo_z_m,sigma_x_m,sigma_y_m,sigma_z_m\n"
+                   "0,1,2,-3,2,2,0\n")
+    r = run_cli("track", str(recording), "-o", str(tmp_path / "x.csv"), "--fixes", str(bad),
+                "--estimate-bias")
+    err = r.stderr.decode().strip()
+    assert r.returncode == 2 and len(err.splitlines()) == 1
+    assert f"{bad}, line 2, column sigma_z_m" in err
+    far = tmp_path / "far.csv"
+    far.write_text(bad.read_text().replace("0,1,2,-3,2,2,0", "99,1,2,-3,2,2,2"))
+    r = run_cli("track", str(recording), "-o", str(tmp_path / "x.csv"), "--fixes", str(far))
+    err = r.stderr.decode().strip()
+    assert r.returncode == 2 and "sync_index 99 but the input has only 3 SYNC edges" in err, err
+    assert not (tmp_path / "x.csv").exists()
