@@ -283,8 +283,11 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
             keep[c].append(np.array(v, copy=True))
         if fixes is not None:
             keep["sync"].append(np.array(b["sync"], copy=True))
-    cols = {c: (np.concatenate(v) if v else np.empty(0)) for c, v in keep.items()}
-    del keep
+    cols = {}
+    for c in names:  # one column at a time: the pieces go as their column is made
+        parts = keep.pop(c)
+        cols[c] = np.concatenate(parts) if parts else np.empty(0)
+        del parts
     if fixes is not None:
         from radar_io.tracking import fusion
 
@@ -302,18 +305,21 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
             cols["az"] += math.radians(bias.daz_deg)
         fwd.fix_rows = np.ascontiguousarray(rows, dtype=np.int64)
         fwd.fixes = np.ascontiguousarray(np.hstack([fixes.xyh_m, fixes.sigma_m]))
-    for batch in smooth_arrays(cols, fwd, summary, block_rows):
+    for batch in smooth_arrays(cols, fwd, summary, block_rows, release=True):
         state, cov, nis, flags, lo, hi = batch
         yield _output(cols["seq"][lo:hi], cols["tod_s"][lo:hi], state, cov, nis, flags,
                       site, path, stats)
 
 
 def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSummary,
-                  block_rows: int = BLOCK
+                  block_rows: int = BLOCK, release: bool = False
                   ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int]]:
-    """Filter and RTS-smooth whole columns; yields (state, cov, nis, flags, lo, hi) per block."""
+    """Filter and RTS-smooth whole columns; yields (state, cov, nis, flags, lo, hi) per block.
+
+    ``release``: drop the measurement columns from ``cols`` once smoothed (before the first
+    yield), so their memory is free while the output is written."""
     K = fwd.K
-    m = (cols["t"], cols["sr"], cols["el"], cols["az"], cols["good"])
+    m: tuple[np.ndarray, ...] = (cols["t"], cols["sr"], cols["el"], cols["az"], cols["good"])
     n = len(m[0])
     nis, flags = np.empty(n), np.empty(n, dtype=np.uint8)
     B = max(1, int(block_rows))
@@ -337,6 +343,10 @@ def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSumm
         has_next = bool(K.smooth(m[0], flags, lo, hi, fx, fP, xs, Ps, has_next,
                                  fwd.params.q_mps2, state, cov))
     del fx, fP
+    if release:
+        m = ()
+        for c in ("t", "sr", "el", "az", "good"):
+            del cols[c]
     for lo in starts:
         hi = min(lo + B, n)
         yield state[lo:hi], cov[lo:hi], nis[lo:hi], flags[lo:hi], lo, hi
