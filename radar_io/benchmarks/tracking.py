@@ -41,8 +41,10 @@ def stonesoup_anchor(rec: str, n: int = ANCHOR_MEASUREMENTS) -> dict[str, float]
 
     import numpy as np
     from stonesoup.models.measurement.nonlinear import CartesianToElevationBearingRange
-    from stonesoup.models.transition.linear import (CombinedLinearGaussianTransitionModel,
-                                                    ConstantVelocity)
+    from stonesoup.models.transition.linear import (
+        CombinedLinearGaussianTransitionModel,
+        ConstantVelocity,
+    )
     from stonesoup.predictor.kalman import ExtendedKalmanPredictor
     from stonesoup.smoother.kalman import ExtendedKalmanSmoother
     from stonesoup.types.angle import Bearing, Elevation
@@ -139,14 +141,16 @@ def run(hours: float = 1.0, workdir: str | None = None, keep: bool = False) -> d
 
 
 def report(res: dict[str, Any]) -> str:
-    lines = [f"tracking: {res['hours']} h at 1 kHz ({res['recording_mb']:.0f} MB, {res['rows']:,} "
-             f"rows) -> smoothed Parquet, fresh process each, radar-io track end to end:",
-             f"  first run (numba compiles) {res['cold_s']:.1f} s wall {res['cold_cpu_s']:.1f} s "
-             f"CPU, peak RSS {res['cold_rss_mb']:.0f} MB",
-             f"  later runs (compiled code cached) {res['warm_s']:.1f} s wall "
-             f"{res['warm_cpu_s']:.1f} s CPU, peak RSS {res['warm_rss_mb']:.0f} MB "
-             f"(goal <= 20 s, <= 1024 MB); {res['warm_us_per_row']:.2f} us per row; "
-             f"{res['tracks']} tracks, {res['outliers']} outliers, NIS mean {res['nis_mean']}"]
+    lines = [
+        (f"tracking: {res['hours']} h at 1 kHz ({res['recording_mb']:.0f} MB, {res['rows']:,} "
+         "rows) -> smoothed Parquet, fresh process each, radar-io track end to end:"),
+        (f"  first run (numba compiles) {res['cold_s']:.1f} s wall {res['cold_cpu_s']:.1f} s "
+         f"CPU, peak RSS {res['cold_rss_mb']:.0f} MB"),
+        (f"  later runs (compiled code cached) {res['warm_s']:.1f} s wall "
+         f"{res['warm_cpu_s']:.1f} s CPU, peak RSS {res['warm_rss_mb']:.0f} MB "
+         f"(goal <= 20 s, <= 1024 MB); {res['warm_us_per_row']:.2f} us per row; "
+         f"{res['tracks']} tracks, {res['outliers']} outliers, NIS mean {res['nis_mean']}"),
+    ]
     if "speedup_vs_stonesoup" in res:
         lines.append(f"  Stone Soup EKF + RTS smoother: {res['stonesoup_us_per_measurement']:.0f} us "
                      f"per measurement -> {res['speedup_vs_stonesoup']:.0f}x (goal >= 100x)")

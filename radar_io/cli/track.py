@@ -64,7 +64,12 @@ def run(args: argparse.Namespace) -> int:
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
     from radar_io.sinks import open_table
     from radar_io.sinks.arrow_convert import output_metadata
-    from radar_io.tracking.tracker import TrackParams, TrackSummary, iter_track, params_metadata
+    from radar_io.tracking.tracker import (
+        TrackParams,
+        TrackSummary,
+        iter_track,
+        params_metadata,
+    )
 
     common = load_common(args)
     path = None

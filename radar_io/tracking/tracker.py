@@ -66,7 +66,7 @@ class TrackParams:
             raise ConfigError(f"tracking model {self.model!r} unknown (known: {', '.join(MODELS)})")
 
     @classmethod
-    def for_site(cls, site: Any = None, **overrides: Any) -> "TrackParams":
+    def for_site(cls, site: Any = None, **overrides: Any) -> TrackParams:
         """Parameters with σ from the site file where it gives them, else the specification;
         ``overrides`` that are not None win."""
         base: dict[str, Any] = {}

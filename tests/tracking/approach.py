@@ -36,7 +36,7 @@ def _integrate(t: np.ndarray, rate: np.ndarray, start: float) -> np.ndarray:
 
 
 def photo_fixes(truth: dict[str, np.ndarray], batch: MeasurementBatch, count: int,
-                sigma_m: float = 2.0, seed: int = 5) -> "Fixes":
+                sigma_m: float = 2.0, seed: int = 5) -> Fixes:
     """``count`` photo fixes (σ ``sigma_m`` per axis) at the first SYNC 0→1 edges."""
     from radar_io.tracking.fusion import Fixes
 
@@ -54,7 +54,7 @@ def approach_truth(rate_hz: float = 1000.0, duration_s: float = 120.0) -> dict[s
     75 m/s heading 250°, a 3 s roll-in to a left rate-one turn of 90° (3°/s), roll-out,
     a right turn of 30° at 2°/s, and a descent at −3.9 m/s (≈ 3°) from t = 70 s.
     """
-    t = np.arange(int(round(duration_s * rate_hz))) / rate_hz
+    t = np.arange(round(duration_s * rate_hz)) / rate_hz
     turn = np.radians(_ramp(t, [(0, 0), (20, 0), (23, -3), (50, -3), (53, 0), (80, 0),
                                 (82, 2), (95, 2), (97, 0), (200, 0)]))
     heading = _integrate(t, turn, np.radians(250.0))

@@ -26,8 +26,10 @@ def _stonesoup_track(batch: MeasurementBatch, p: TrackParams, x0: np.ndarray,
                      P0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Smoothed radar-frame means (n, 6: x y h vx vy vh) and covariances from Stone Soup."""
     from stonesoup.models.measurement.nonlinear import CartesianToElevationBearingRange
-    from stonesoup.models.transition.linear import (CombinedLinearGaussianTransitionModel,
-                                                    ConstantVelocity)
+    from stonesoup.models.transition.linear import (
+        CombinedLinearGaussianTransitionModel,
+        ConstantVelocity,
+    )
     from stonesoup.predictor.kalman import ExtendedKalmanPredictor
     from stonesoup.smoother.kalman import ExtendedKalmanSmoother
     from stonesoup.types.angle import Bearing, Elevation

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-
 from conftest import ROOT, run_cli
+
 from radar_io.decoding.batch_decoder import decode_bytes
 from radar_io.recording.rdrlog import iter_payloads
 from radar_io.sinks.arrow_convert import read_metadata
@@ -113,7 +113,7 @@ def test_fixes_estimate_bias_and_bias_out(tmp_path):
     doc = json.loads(cal_out.read_text())
     st = doc["statistics"]
     assert "method" in st and doc["provenance"]["fixes"] == "fixes.csv"
-    for k, v in injected.items():
+    for k in injected:
         # the new set's totals undo the wrong calibration: ≈ 0 within 3σ
         assert abs(doc["biases"][k]) <= 3 * st[k]["sigma"], (k, doc["biases"][k], st[k])
         assert doc["biases"][k] == st[k]["estimate"]

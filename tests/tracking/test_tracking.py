@@ -7,8 +7,13 @@ import pytest
 
 from radar_io.coordinates.transforms import radar_xyh
 from radar_io.decoding.measurement import MeasurementBatch
-from radar_io.tracking.tracker import (TRACK_COLUMNS, TrackParams, TrackSummary, iter_track,
-                                       track_batch)
+from radar_io.tracking.tracker import (
+    TRACK_COLUMNS,
+    TrackParams,
+    TrackSummary,
+    iter_track,
+    track_batch,
+)
 from tests.tracking.approach import approach_truth, measure
 
 AXES = ("x", "y", "h")
@@ -119,7 +124,7 @@ def test_long_gap_restarts_the_track(approach):
 
 
 def test_streaming_and_blocks_give_the_same_answer(approach):
-    truth, batch, _ = approach
+    _, batch, _ = approach
     n = 30_000
     part = MeasurementBatch({c: batch[c][:n] for c in batch.columns})
     params = TrackParams()
