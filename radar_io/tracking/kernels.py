@@ -39,6 +39,17 @@ def _jit(fn: Callable[..., Any]) -> Callable[..., Any]:
 
 
 @_jit
+def _mul6(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
+    """out = A B for 6×6 matrices."""
+    for i in range(6):
+        for j in range(6):
+            acc = 0.0
+            for k in range(6):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
+
+
+@_jit
 def _predict(x: np.ndarray, P: np.ndarray, dt: float, q: float) -> None:
     """x ← F x, P ← F P Fᵀ + Q for the CV model (per axis Q = q·[[dt³/3, dt²/2], [dt²/2, dt]])."""
     for i in range(3):
@@ -119,12 +130,7 @@ def _apply(x: np.ndarray, P: np.ndarray, H: np.ndarray, v0: float, v1: float, v2
         for j in range(6):
             A[i, j] = -(K[i, 0] * H[0, j] + K[i, 1] * H[1, j] + K[i, 2] * H[2, j])
         A[i, i] += 1.0
-    for i in range(6):
-        for j in range(6):
-            acc = 0.0
-            for k in range(6):
-                acc += A[i, k] * P[k, j]
-            T[i, j] = acc
+    _mul6(A, P, T)
     for i in range(6):
         for j in range(i, 6):
             acc = K[i, 0] * K[j, 0] + K[i, 1] * K[j, 1] + K[i, 2] * K[j, 2]
@@ -313,11 +319,7 @@ def smooth(t: np.ndarray, flags: np.ndarray, i0: int, i1: int, fx: np.ndarray,
                 for b in range(6):
                     acc += G[a, b] * xp[b]
                 xs[a] = acc
-                for b in range(6):
-                    acc = 0.0
-                    for c in range(6):
-                        acc += G[a, c] * Pp[c, b]
-                    E[a, b] = acc
+            _mul6(G, Pp, E)
             for a in range(6):
                 for b in range(a, 6):
                     acc = fP[j, a, b]

@@ -239,11 +239,10 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
     """Track decoded batches (in time order); yields batches of :data:`TRACK_COLUMNS`.
 
     ``smooth=False``: the forward filter, one output batch per input batch as it comes
-    (live use). ``smooth=True``: keeps the five measurement columns of every row
-    (~40 B/row), filters, smooths backwards block by block (the block's filtered
-    covariances are recomputed from a checkpoint, so memory is ~100 B/row, not 6×6 per
-    row) and yields the result in blocks of ``block_rows`` rows. ``summary`` collects
-    counts and NIS statistics.
+    (live use). ``smooth=True``: keeps the measurement columns of every row, filters,
+    smooths backwards block by block (the block's filtered covariances are recomputed from
+    a checkpoint, so memory is ~140 B/row in all, not 6×6 float64 per row) and yields the
+    result in blocks of ``block_rows`` rows. ``summary`` collects counts and NIS statistics.
 
     ``fixes`` (:class:`~radar_io.tracking.fusion.Fixes`, smoother only): photo positions
     at SYNC edges, fused as position measurements. ``estimate_bias``: first the radar-only
