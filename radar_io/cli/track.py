@@ -54,6 +54,12 @@ def add_subparser(sub: Any) -> None:
                    "the bias-corrected measurements")
     p.add_argument("--bias-out", metavar="CAL.json",
                    help="write the estimated biases as a calibration set (with --estimate-bias)")
+    p.add_argument("--airdata", metavar="LOG",
+                   help="airborne recorder CAN log (as radar-io align reads): pressure altitude "
+                   "aligned by the shutter events, its offset estimated, fused as height")
+    p.add_argument("--dbc", metavar="DBC", help="air-data DBC (default firmware_specs/airdata.dbc)")
+    p.add_argument("--sigma-pa-m", type=positive_float, metavar="S",
+                   help="pressure-altitude noise 1σ (m; default 3)")
     p.add_argument("-q", "--quiet", action="store_true", help="no summary on stderr")
     add_common(p)
     p.set_defaults(func=run)
@@ -81,11 +87,12 @@ def run(args: argparse.Namespace) -> int:
     params = TrackParams.for_site(common["site"], q_mps2=args.q_mps2, model=args.model,
                                   sigma_range_m=args.sigma_range_m,
                                   sigma_angle_deg=args.sigma_angle_deg, gate_nis=args.gate_nis,
-                                  max_gap_s=args.max_gap_s)
+                                  max_gap_s=args.max_gap_s, sigma_pa_m=args.sigma_pa_m)
     if not os.path.isfile(args.input):
         raise ConfigError(f"input not found: {args.input}")
-    if args.forward_only and (args.fixes or args.estimate_bias):
-        raise ConfigError("--fixes and --estimate-bias need the smoother (drop --forward-only)")
+    if args.forward_only and (args.fixes or args.estimate_bias or args.airdata):
+        raise ConfigError("--fixes, --airdata and --estimate-bias need the smoother "
+                          "(drop --forward-only)")
     if (args.estimate_bias or args.bias_out) and not args.fixes:
         raise ConfigError("--estimate-bias and --bias-out need --fixes FIXES.csv")
     if args.bias_out and not args.estimate_bias:
@@ -95,6 +102,11 @@ def run(args: argparse.Namespace) -> int:
         from radar_io.tracking.fusion import read_fixes
 
         fixes = read_fixes(args.fixes)
+    airdata = None
+    if args.airdata:
+        from radar_io.decoding.airdata import load_dbc, read_can_log
+
+        airdata = read_can_log(args.airdata, load_dbc(args.dbc))
     meta = output_metadata(common["spec"], common["site"], common["calibration"],
                            source=args.input, **params_metadata(params, not args.forward_only))
     report = ReadReport()
@@ -106,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         stats: dict[str, int] = {}
         for out in iter_track(batches, params, smooth=not args.forward_only,
                               site=common["site"], path=path, summary=summary, fixes=fixes,
-                              estimate_bias=args.estimate_bias):
+                              estimate_bias=args.estimate_bias, airdata=airdata):
             if not writer.rows and not args.forward_only:  # smoothed: counts known already
                 writer.metadata.update(summary.metadata())
             writer.write(cast(Any, out))  # a MeasurementBatch reads like the Batch mapping
@@ -130,6 +142,9 @@ def run(args: argparse.Namespace) -> int:
             print("radar-io track: bias " + ", ".join(
                 f"{k} {m[f'tracking.bias_{k}']}" for k in ("dsr_m", "del_deg", "daz_deg"))
                 + f" from {summary.bias.fixes_used} fixes", file=sys.stderr)
+        if summary.pressure_altitude is not None:
+            print(f"radar-io track: pressure altitude: {m['tracking.pa_samples']} samples, "
+                  f"offset from radar height {m['tracking.pa_offset_m']} m", file=sys.stderr)
     return 0
 
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from radar_io.errors import CalibrationError, CalibrationInputError
+from radar_io.errors import AirborneError, CalibrationError, CalibrationInputError
 
 FIX_COLUMNS = ("sync_index", "photo_x_m", "photo_y_m", "photo_z_m",
                "sigma_x_m", "sigma_y_m", "sigma_z_m")
@@ -178,3 +178,56 @@ def _sea_jacobian(p: np.ndarray) -> np.ndarray:
     return np.array([[x / r, y / r, h / r],
                      [-h * x / (r2 * g), -h * y / (r2 * g), g / r2],
                      [-y / g2, x / g2, 0.0]])
+
+
+@dataclass
+class PressureAltitude:
+    """Air-data pressure altitude aligned to the radar frames (``radar-io align``'s clock fit)."""
+
+    rows: np.ndarray        #: nearest radar frame of each sample
+    pa_m: np.ndarray        #: pressure altitude (m)
+    clock_offset_s: float
+    clock_drift_ppm: float
+    matched_events: int
+    offset_m: float = math.nan   #: PA − (radar H + earth curvature), estimated
+    offset_sigma_m: float = math.nan
+
+
+def align_pressure_altitude(log: Any, t_s: np.ndarray, sync: np.ndarray,
+                            source: str = "air data") -> PressureAltitude:
+    """Fit the aircraft clock to the radar's SYNC edges and place each 8 Hz pressure-altitude
+    sample at its nearest radar frame (within 1.5 frame periods)."""
+    from radar_io.analysis.clock_alignment import fit_clock, shutter_instants
+    from radar_io.simulation.aircraft import FT_M
+
+    edge, period = shutter_instants(t_s, sync)
+    fit = fit_clock(edge, log.event_time_s, log.event_count, frame_period_s=period)
+    s = log.samples
+    ok = np.isfinite(s["time_s"]) & np.isfinite(s["pressure_altitude_ft"])
+    t_pa = fit.to_radar(s["time_s"][ok])
+    j = np.clip(np.searchsorted(t_s, t_pa), 1, max(t_s.size - 1, 1))
+    j -= (t_pa - t_s[j - 1]) < (t_s[j] - t_pa)
+    near = np.abs(t_s[j] - t_pa) <= 1.5 * period
+    if not near.any():
+        raise AirborneError(f"{source}: no pressure-altitude sample falls inside the radar data")
+    return PressureAltitude(j[near].astype(np.int64), s["pressure_altitude_ft"][ok][near] * FT_M,
+                            fit.offset_s, fit.drift_ppm, int(fit.radar_index.size))
+
+
+def pressure_altitude_heights(pa: PressureAltitude, state: np.ndarray, cov: np.ndarray,
+                              sigma_pa_m: float) -> np.ndarray:
+    """Estimate the constant offset PA − (H + curvature) against the radar track at the
+    samples (``state`` / ``cov`` rows per sample; sets ``pa.offset_m`` and its σ) and return
+    the radar-frame height each sample measures: PA − curvature − offset (NaN off the track)."""
+    from radar_io.simulation.aircraft import altitude_msl_m
+
+    x, y, h = state[:, 0], state[:, 1], state[:, 2]
+    curvature = altitude_msl_m(x, y, h, 0.0) - h
+    d = pa.pa_m - curvature - h
+    ok = np.isfinite(d)
+    if not ok.any():
+        raise AirborneError("no pressure-altitude sample falls on the radar track")
+    w = 1.0 / (sigma_pa_m ** 2 + cov[ok, 2].astype(np.float64) ** 2)
+    pa.offset_m = float(np.sum(w * d[ok]) / np.sum(w))
+    pa.offset_sigma_m = float(1.0 / math.sqrt(np.sum(w)))
+    return np.asarray(pa.pa_m - curvature - pa.offset_m)

@@ -45,7 +45,8 @@ class TrackParams:
     ``gate_nis``: a measurement whose normalised innovation squared exceeds this is an
     outlier (χ², 3 degrees of freedom: 30 ≈ 1.4·10⁻⁶ false alarms); ``max_gap_s``: with
     no measurement used for longer, the track ends and restarts at the next good one;
-    ``v0_sigma_mps``: σ of each velocity component when a track starts.
+    ``v0_sigma_mps``: σ of each velocity component when a track starts; ``sigma_pa_m``: σ
+    of an air-data pressure-altitude sample used as a height measurement.
     """
 
     q_mps2: float = 0.5
@@ -54,11 +55,12 @@ class TrackParams:
     gate_nis: float = 30.0
     max_gap_s: float = 5.0
     v0_sigma_mps: float = 300.0
+    sigma_pa_m: float = 3.0
     model: str = "cv"
 
     def __post_init__(self) -> None:
         for name in ("q_mps2", "sigma_range_m", "sigma_angle_deg", "gate_nis", "max_gap_s",
-                     "v0_sigma_mps"):
+                     "v0_sigma_mps", "sigma_pa_m"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ConfigError(f"tracking parameter {name} must be a positive number, got {v!r}")
@@ -115,8 +117,9 @@ class TrackSummary:
     time_errors: int = 0
     nis_sum: float = 0.0
     nis_in_95: int = 0  #: NIS below χ²₃(0.95) = 7.815
-    fixes_used: int = 0
+    fixes_used: int = 0  #: photo fixes and pressure-altitude samples applied
     bias: Any = None    #: a :class:`~radar_io.tracking.fusion.BiasEstimate` with estimate_bias
+    pressure_altitude: Any = None  #: a :class:`~radar_io.tracking.fusion.PressureAltitude`
 
     def add(self, nis: np.ndarray, flags: np.ndarray, good: np.ndarray) -> None:
         from radar_io.tracking import kernels as K
@@ -142,6 +145,13 @@ class TrackSummary:
             for k, v, sd in zip(("dsr_m", "del_deg", "daz_deg"), (b.dsr_m, b.del_deg, b.daz_deg),
                                 b.sigma):
                 meta[f"tracking.bias_{k}"] = f"{v:.6g} ± {sd:.3g}"
+        pa = self.pressure_altitude
+        if pa is not None:
+            meta["tracking.pa_offset_m"] = f"{pa.offset_m:.4g} ± {pa.offset_sigma_m:.2g}"
+            meta["tracking.pa_samples"] = str(pa.rows.size)
+            meta["tracking.pa_clock_offset_s"] = f"{pa.clock_offset_s:.6f}"
+            meta["tracking.pa_clock_drift_ppm"] = f"{pa.clock_drift_ppm:.3f}"
+            meta["tracking.pa_matched_shutter_events"] = str(pa.matched_events)
         return meta
 
 
@@ -234,7 +244,7 @@ class _Forward:
 def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None = None, *,
                smooth: bool = True, site: Any = None, path: Any = None,
                summary: TrackSummary | None = None, block_rows: int = BLOCK,
-               fixes: Any = None, estimate_bias: bool = False
+               fixes: Any = None, estimate_bias: bool = False, airdata: Any = None
                ) -> Iterator[MeasurementBatch]:
     """Track decoded batches (in time order); yields batches of :data:`TRACK_COLUMNS`.
 
@@ -247,15 +257,20 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
     ``fixes`` (:class:`~radar_io.tracking.fusion.Fixes`, smoother only): photo positions
     at SYNC edges, fused as position measurements. ``estimate_bias``: first the radar-only
     track gives ΔSR, ΔEL, ΔAZ against the fixes (``summary.bias``); the measurements are
-    then corrected by it and tracked with the fixes fused.
+    then corrected by it and tracked with the fixes fused. ``airdata``
+    (:class:`~radar_io.decoding.airdata.AircraftLog`, smoother only): the aircraft clock is
+    fitted to the SYNC edges, the offset of pressure altitude from the radar height (plus
+    earth curvature) is estimated against the radar track, and each sample then measures
+    the height with σ ``params.sigma_pa_m``.
     """
     params = params or TrackParams()
     summary = summary if summary is not None else TrackSummary()
     fwd = _Forward(params)
     tb = TimeBase()
     stats: dict[str, int] = {}
-    if (fixes is not None or estimate_bias) and not smooth:
-        raise ConfigError("photo fixes and bias estimation need the smoother (not forward-only)")
+    if (fixes is not None or estimate_bias or airdata is not None) and not smooth:
+        raise ConfigError("photo fixes, air data and bias estimation need the smoother "
+                          "(not forward-only)")
     if estimate_bias and fixes is None:
         raise ConfigError("bias estimation needs photo fixes")
     if not smooth:
@@ -272,7 +287,8 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
             yield _output(b["seq"], b["tod_s"], fx, cov, nis, flags, site, path, stats)
         summary.tracks, summary.time_errors = int(fwd.carry[3]), int(fwd.carry[4])
         return
-    names = ("seq", "tod_s", "t", "sr", "el", "az", "good") + (("sync",) if fixes is not None else ())
+    fused = fixes is not None or airdata is not None
+    names = ("seq", "tod_s", "t", "sr", "el", "az", "good") + (("sync",) if fused else ())
     keep: dict[str, list[np.ndarray]] = {c: [] for c in names}
     for b in batches:
         stats = b.stats
@@ -280,34 +296,67 @@ def iter_track(batches: Iterable[MeasurementBatch], params: TrackParams | None =
         for c, v in (("seq", b["seq"]), ("tod_s", b["tod_s"]), ("t", t), ("sr", sr),
                      ("el", el), ("az", az), ("good", good)):
             keep[c].append(np.array(v, copy=True))
-        if fixes is not None:
+        if fused:
             keep["sync"].append(np.array(b["sync"], copy=True))
     cols = {}
     for c in names:  # one column at a time: the pieces go as their column is made
         parts = keep.pop(c)
         cols[c] = np.concatenate(parts) if parts else np.empty(0)
         del parts
-    if fixes is not None:
-        from radar_io.tracking import fusion
-
-        rows = fusion.fix_rows(fixes, cols.pop("sync"), fixes.source or "fixes")
-        if estimate_bias:
-            at = {int(r): j for j, r in enumerate(rows)}
-            st, cv = np.full((len(rows), 6), np.nan), np.full((len(rows), 9), np.nan)
-            for state, cov, _, _, lo, hi in smooth_arrays(cols, _Forward(params),
-                                                          TrackSummary(), block_rows):
-                for r in rows[(rows >= lo) & (rows < hi)]:
-                    st[at[int(r)]], cv[at[int(r)]] = state[r - lo], cov[r - lo]
-            summary.bias = bias = fusion.estimate_bias(fixes, st, cv)
-            cols["sr"] += bias.dsr_m
-            cols["el"] += math.radians(bias.del_deg)
-            cols["az"] += math.radians(bias.daz_deg)
-        fwd.fix_rows = np.ascontiguousarray(rows, dtype=np.int64)
-        fwd.fixes = np.ascontiguousarray(np.hstack([fixes.xyh_m, fixes.sigma_m]))
+    if fused:
+        fwd.fix_rows, fwd.fixes = _position_measurements(cols, params, summary, block_rows,
+                                                         fixes, estimate_bias, airdata)
     for batch in smooth_arrays(cols, fwd, summary, block_rows, release=True):
         state, cov, nis, flags, lo, hi = batch
         yield _output(cols["seq"][lo:hi], cols["tod_s"][lo:hi], state, cov, nis, flags,
                       site, path, stats)
+
+
+def _position_measurements(cols: dict[str, np.ndarray], params: TrackParams,
+                           summary: TrackSummary, block_rows: int, fixes: Any,
+                           estimate_bias: bool, airdata: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Rows (ascending) and [x, y, h, σx, σy, σh] of the photo fixes and pressure-altitude
+    heights (σ ∞: that axis is not measured); with ``estimate_bias`` the radar columns in
+    ``cols`` are corrected by the estimate first."""
+    from radar_io.tracking import fusion
+
+    sync = cols.pop("sync")
+    rows_parts, meas_parts = [], []
+    if fixes is not None:
+        rows = fusion.fix_rows(fixes, sync, fixes.source or "fixes")
+        if estimate_bias:
+            summary.bias = bias = fusion.estimate_bias(fixes, *_at_rows(cols, params, rows,
+                                                                         block_rows))
+            cols["sr"] += bias.dsr_m
+            cols["el"] += math.radians(bias.del_deg)
+            cols["az"] += math.radians(bias.daz_deg)
+        rows_parts.append(rows)
+        meas_parts.append(np.hstack([fixes.xyh_m, fixes.sigma_m]))
+    if airdata is not None:
+        pa = fusion.align_pressure_altitude(airdata, cols["t"], sync)
+        h = fusion.pressure_altitude_heights(pa, *_at_rows(cols, params, pa.rows, block_rows),
+                                             params.sigma_pa_m)
+        ok = np.isfinite(h)
+        pa.rows, pa.pa_m = pa.rows[ok], pa.pa_m[ok]
+        summary.pressure_altitude = pa
+        n = int(ok.sum())
+        rows_parts.append(pa.rows)
+        meas_parts.append(np.column_stack([np.zeros(n), np.zeros(n), h[ok], np.full(n, np.inf),
+                                           np.full(n, np.inf), np.full(n, params.sigma_pa_m)]))
+    rows = np.concatenate(rows_parts).astype(np.int64)
+    order = np.argsort(rows, kind="stable")
+    return np.ascontiguousarray(rows[order]), np.ascontiguousarray(np.vstack(meas_parts)[order])
+
+
+def _at_rows(cols: dict[str, np.ndarray], params: TrackParams, rows: np.ndarray,
+             block_rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """The radar-only smoothed state and covariance columns at ``rows``."""
+    st, cv = np.full((rows.size, 6), np.nan), np.full((rows.size, 9), np.nan)
+    for state, cov, _, _, lo, hi in smooth_arrays(cols, _Forward(params), TrackSummary(),
+                                                  block_rows):
+        sel = (rows >= lo) & (rows < hi)
+        st[sel], cv[sel] = state[rows[sel] - lo], cov[rows[sel] - lo]
+    return st, cv
 
 
 def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSummary,
@@ -354,13 +403,13 @@ def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSumm
 def track_batch(batch: MeasurementBatch, params: TrackParams | None = None, *,
                 smooth: bool = True, site: Any = None, path: Any = None,
                 summary: TrackSummary | None = None, fixes: Any = None,
-                estimate_bias: bool = False) -> MeasurementBatch:
+                estimate_bias: bool = False, airdata: Any = None) -> MeasurementBatch:
     """Track one decoded batch: one row per input row, :data:`TRACK_COLUMNS` (+ runway,
-    geodetic and path deviation with ``site`` / ``path``); ``fixes`` and ``estimate_bias``
-    as :func:`iter_track`."""
+    geodetic and path deviation with ``site`` / ``path``); ``fixes``, ``estimate_bias`` and
+    ``airdata`` as :func:`iter_track`."""
     out = list(iter_track([batch], params, smooth=smooth, site=site, path=path,
                           summary=summary, block_rows=max(len(batch), 1), fixes=fixes,
-                          estimate_bias=estimate_bias))
+                          estimate_bias=estimate_bias, airdata=airdata))
     if len(out) == 1:
         return out[0]
     return MeasurementBatch.concat(out) if out else _output(

@@ -148,3 +148,45 @@ def test_fix_errors_are_one_line(recording, tmp_path):
     err = r.stderr.decode().strip()
     assert r.returncode == 2 and "sync_index 99 but the input has only 3 SYNC edges" in err, err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_airdata_pressure_altitude_fused(tmp_path):
+    """Pressure altitude from a simulated CAN log, aligned by the shutter events."""
+    import can
+
+    from radar_io.simulation.aircraft import (
+        AircraftConfig,
+        AircraftSimulator,
+        qnh_height_m,
+    )
+    from radar_io.simulation.radar import RadarSimulator, SimConfig
+
+    antenna_msl_m, qnh_hpa = 12.0, 1003.0
+    radar = RadarSimulator(config=SimConfig(tod_start_s=30_000.0, seed=2, ng_per_min=0.0,
+                                            sync_every_s=1.7))
+    data, truth = radar.generate(40_000)
+    raw = tmp_path / "flight.bin"
+    raw.write_bytes(data)
+    aircraft = AircraftSimulator(radar.script, radar.cfg,
+                                 AircraftConfig(clock_offset_s=5555.5, drift_ppm=20.0,
+                                                antenna_msl_m=antenna_msl_m, qnh_hpa=qnh_hpa),
+                                 duration_s=40.0)
+    log = tmp_path / "aircraft.asc"
+    writer = can.Logger(str(log))
+    for msg in aircraft.messages(0.0, 40.0):
+        writer.on_message_received(msg)
+    writer.stop()
+    out = tmp_path / "bet.parquet"
+    r = run_cli("track", str(raw), "-o", str(out), "--airdata", str(log), "--sigma-range-m",
+                "1.04", "--sigma-angle-deg", "0.005", "--sigma-pa-m", "1.0")
+    assert r.returncode == 0, r.stderr
+    assert "pressure altitude:" in r.stderr.decode()
+    meta = read_metadata(pq.read_schema(out))
+    offset, sigma = (float(v) for v in meta["tracking.pa_offset_m"].split(" ± "))
+    # PA − (H + curvature) = antenna MSL height + the ISA height of the QNH level
+    assert abs(offset - (antenna_msl_m + qnh_height_m(qnh_hpa))) < 0.5 and 0 < sigma < 0.5
+    assert int(meta["tracking.pa_samples"]) > 250          # 8 Hz for ~38 s
+    assert int(meta["tracking.fixes_used"]) == int(meta["tracking.pa_samples"])
+    assert abs(float(meta["tracking.pa_clock_drift_ppm"]) - 20.0) < 15.0
+    h = pq.read_table(out, columns=["h_m"])["h_m"].to_numpy()
+    assert np.sqrt(np.mean((h[2000:] - truth["h_m"][2000:]) ** 2)) < 0.3
