@@ -83,6 +83,9 @@ CASES: list[Case] = [
     Case("site", "ASTERIX SIC not an integer", SITE_MIN + "[asterix]\nsac = 0\nsic = 1.5\n",
          "field asterix.sic: expected an integer, got a number"),
     Case("site", "ASTERIX SIC missing", SITE_MIN + "[asterix]\nsac = 0\n", "field asterix.sic: missing"),
+    Case("site", "tracker range σ not positive",
+         SITE_MIN.replace("h_m = 10.0\n", "h_m = 10.0\nsigma_range_m = 0.0\n"),
+         "field radar.sigma_range_m: 0.0 must be greater than 0.0"),
     # ---- reference path TOML -----------------------------------------------------------
     Case("path", "empty file", "  \n", "is empty"),
     Case("path", "binary file", b"\x00\x01\x02frame", "is a binary file"),

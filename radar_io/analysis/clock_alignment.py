@@ -67,19 +67,28 @@ def radar_track(batches: Iterable[MeasurementBatch]) -> RadarTrack:
     if tod.size < 2:
         raise AirborneError("the radar recording holds fewer than 2 RDR1 frames")
     tod = tod + _DAY * np.cumsum(np.diff(tod, prepend=tod[0]) < -_DAY / 2)
-    steps = np.diff(tod)
-    period = float(np.median(steps))
-    if not period > 0:
-        raise AirborneError("cannot determine the radar frame period from TOD")
-    sync = cols["sync"].astype(bool)
-    e = np.flatnonzero(sync[1:] & ~sync[:-1]) + 1
-    edge = tod[e] - 0.5 * period
-    edge[steps[e - 1] > 1.5 * period] = np.nan
+    edge, period = shutter_instants(tod, cols["sync"])
     h = cols["h_m"].astype(np.float64)
     return RadarTrack(tod_s=tod, h_m=h, x_m=cols["x_m"].astype(np.float64),
                       y_m=cols["y_m"].astype(np.float64),
                       valid=(cols["rx_good"] == 1) & np.isfinite(h), edge_s=edge,
                       frame_period_s=period, frames=int(tod.size))
+
+
+def shutter_instants(tod_s: np.ndarray, sync: np.ndarray) -> tuple[np.ndarray, float]:
+    """Estimated shutter instants (unwrapped TOD) of the SYNC 0→1 edges, NaN where the frame
+    before the edge is missing, and the median frame period (s); see the module doc."""
+    if tod_s.size < 2:
+        raise AirborneError("the radar recording holds fewer than 2 RDR1 frames")
+    steps = np.diff(tod_s)
+    period = float(np.median(steps))
+    if not period > 0:
+        raise AirborneError("cannot determine the radar frame period from TOD")
+    s = np.asarray(sync).astype(bool)
+    e = np.flatnonzero(s[1:] & ~s[:-1]) + 1
+    edge = tod_s[e] - 0.5 * period
+    edge[steps[e - 1] > 1.5 * period] = np.nan
+    return edge, period
 
 
 def read_radar_track(path: str | os.PathLike[str], spec: Any = None) -> RadarTrack:

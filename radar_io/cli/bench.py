@@ -30,6 +30,10 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--ch10-hours", type=float, default=0.0, metavar="H",
                    help="also export an H-hour 1 kHz recording to IRIG 106 Chapter 10 in a "
                    "fresh process (wall, CPU, peak RSS); 0 to skip")
+    p.add_argument("--tracking-hours", type=float, default=0.0, metavar="H",
+                   help="also track an H-hour 1 kHz recording to smoothed Parquet through the "
+                   "CLI (fresh processes: first with numba compiling, then cached; peak RSS) "
+                   "beside Stone Soup's EKF + smoother per measurement; 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
@@ -65,6 +69,11 @@ def run(args: argparse.Namespace) -> int:
 
         result["ch10"] = ch10.run(minutes=0.0, hours=args.ch10_hours)
         lines.append(ch10.report(result["ch10"]))
+    if args.tracking_hours > 0:
+        from radar_io.benchmarks import tracking
+
+        result["tracking"] = tracking.run(hours=args.tracking_hours)
+        lines.append(tracking.report(result["tracking"]))
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 

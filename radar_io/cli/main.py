@@ -18,7 +18,7 @@ COMMANDS = (
     "radar_io.cli.decode", "radar_io.cli.simulate", "radar_io.cli.monitor",
     "radar_io.cli.serve", "radar_io.cli.bench", "radar_io.cli.calibrate",
     "radar_io.cli.runway", "radar_io.cli.airborne", "radar_io.cli.archive",
-    "radar_io.cli.report", "radar_io.cli.export", "radar_io.cli.doctor",
+    "radar_io.cli.report", "radar_io.cli.export", "radar_io.cli.doctor", "radar_io.cli.track",
 )
 
 

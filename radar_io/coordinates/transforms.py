@@ -54,6 +54,8 @@ class Site:
     description: str = ""
     asterix_sac: int | None = None   #: ASTERIX System Area Code 0..255 ([asterix] sac), None if unset
     asterix_sic: int | None = None   #: ASTERIX System Identification Code 0..255 ([asterix] sic)
+    sigma_range_m: float | None = None    #: range noise 1σ (m) for the tracker, None: the spec's
+    sigma_angle_deg: float | None = None  #: angle noise 1σ (deg) for the tracker, None: the spec's
 
     def to_dict(self) -> dict[str, Any]:
         doc: dict[str, Any] = {
@@ -62,6 +64,9 @@ class Site:
             "runway": {"heading_deg": self.runway_heading_deg, "radar_xr_m": self.radar_xr_m,
                        "radar_yr_m": self.radar_yr_m, "radar_hr_m": self.radar_hr_m},
         }
+        for key in ("sigma_range_m", "sigma_angle_deg"):
+            if getattr(self, key) is not None:
+                doc["radar"][key] = getattr(self, key)
         if self.asterix_sac is not None:
             doc["asterix"] = {"sac": self.asterix_sac, "sic": self.asterix_sic}
         return doc
@@ -89,7 +94,7 @@ def resolve_site(site: str | os.PathLike[str]) -> Path:
 
 
 #: [section] → keys allowed in a site file (docs/input-validation.md)
-SITE_KEYS = {"radar": ("lat_deg", "lon_deg", "h_m"),
+SITE_KEYS = {"radar": ("lat_deg", "lon_deg", "h_m", "sigma_range_m", "sigma_angle_deg"),
              "runway": ("heading_deg", "radar_xr_m", "radar_yr_m", "radar_hr_m"),
              "asterix": ("sac", "sic")}
 
@@ -123,6 +128,8 @@ def load_site(path: str | os.PathLike[str]) -> Site:
         radar_hr_m=runway.number("radar_hr_m", -1e4, 1e4),
         asterix_sac=sac,
         asterix_sic=sic,
+        sigma_range_m=radar.number("sigma_range_m", above=0.0, hi=1000.0, default=None),
+        sigma_angle_deg=radar.number("sigma_angle_deg", above=0.0, hi=10.0, default=None),
     )
 
 

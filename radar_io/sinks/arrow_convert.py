@@ -26,7 +26,7 @@ from radar_io.decoding.model import POSITION_COLUMNS
 NULLABLE_COLUMNS: frozenset[str] = frozenset(
     (*POSITION_COLUMNS, "dy_m", "dz_m", "along_m"))
 #: unit by column-name suffix (SI units at the API: the name says the unit)
-_SUFFIX_UNITS = (("_deg", "deg"), ("_m", "m"), ("_s", "s"), ("_hz", "Hz"))
+_SUFFIX_UNITS = (("_mps", "m/s"), ("_m2", "m2"), ("_deg", "deg"), ("_m", "m"), ("_s", "s"), ("_hz", "Hz"))
 #: columns whose unit the suffix cannot say
 _NAMED_UNITS = {"seq": "count", "status_raw": "bits", "leg": "count"}
 #: prefix of the schema metadata keys radar_io writes
