@@ -43,7 +43,7 @@ class ServiceConfig:
     history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)
     ws_queue_size: Annotated[int, Ge(1), Le(1_000_000)] = 5000  #: per client; oldest skipped beyond
     ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
-    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.05  #: fan-out tick (s)
+    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.0  #: 0: adaptive; > 0: minimum spacing of fan-out dispatches (s)
     allowed_origins: list[str] = field(default_factory=list)  #: besides the same host
     max_body_kb: Annotated[int, Ge(1), Le(1 << 20)] = 1024    #: JSON bodies (413 beyond)
     max_upload_mb: Annotated[int, Ge(1), Le(1 << 16)] = 512   #: /api/runway uploads
