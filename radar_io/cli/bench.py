@@ -26,6 +26,8 @@ def add_subparser(sub: Any) -> None:
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
                    "/api/status latency, messages per client, lost, RSS; 0 to skip")
+    p.add_argument("--fanout-per-message", action="store_true",
+                   help="the fan-out clients take one message per websocket frame (no batch=1)")
     p.add_argument("--core-only", action="store_true",
                    help="only the decoding paths (no service latency, no plug-in benchmarks)")
     p.set_defaults(func=run)
@@ -45,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 
-        fan = result["fanout"] = bench_fanout(args.fanout_clients)
+        fan = result["fanout"] = bench_fanout(args.fanout_clients,
+                                              batch=not args.fanout_per_message)
         lines.append(f"fan-out {args.fanout_clients} clients: " + ", ".join(
             f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
             for k, v in fan.items() if not isinstance(v, (dict, list))))

@@ -14,8 +14,9 @@ hold at most :data:`ROUND_SENDS` frames; clients beyond wait, first come first s
 for a later iteration. Between iterations the loop serves HTTP (``/api/status``,
 control), so a heavy fan-out delays a request by about one round, not by every
 client's backlog. A client's queue is bounded in messages (``queue_size``): beyond it
-the oldest blocks are skipped (counted in ``dropped``; the recording is never affected:
-it was written by the reader thread before decoding).
+the oldest blocks are skipped, and a one-message-per-frame client more than
+:data:`MAX_LAG_S` behind skips ahead to the newest block (both counted in ``dropped``; the
+recording is never affected: it was written by the reader thread before decoding).
 
 Per client: ``batch`` clients receive one JSON array per turn (one block's array text is
 built once and shared by all of them; several waiting blocks are joined into one frame,
@@ -47,6 +48,9 @@ QUANTUM = 16
 #: frames all clients of one event loop send in one loop iteration, at most (~1-2 ms of
 #: websocket sends on a 2-core x86; then HTTP requests get their turn)
 ROUND_SENDS = 128
+#: a one-message-per-frame client whose oldest waiting message is older than this (s)
+#: skips ahead to the newest block (it cannot keep up: fresh data beats a growing lag)
+MAX_LAG_S = 1.0
 
 
 class SendTurns:
@@ -104,11 +108,12 @@ def turns_for(loop: asyncio.AbstractEventLoop) -> SendTurns:
 class Block:
     """Messages published together: shared, immutable, the array text built once."""
 
-    __slots__ = ("items", "first", "last", "_array")
+    __slots__ = ("items", "first", "last", "t_mono", "_array")
 
-    def __init__(self, items: list[tuple[int, str]]) -> None:
+    def __init__(self, items: list[tuple[int, str]], t_mono: float = 0.0) -> None:
         self.items = items
         self.first, self.last = items[0][0], items[-1][0]
+        self.t_mono = t_mono  #: dispatch time (monotonic s)
         self._array: str | None = None
 
     @property
@@ -147,9 +152,10 @@ class Client:
             q.append(Block([block.items[-1]]))
             self.queued = 1
         else:
+            behind = bool(q) and not self.batch and block.t_mono - q[0].t_mono > MAX_LAG_S
             q.append(block)
             self.queued += len(block.items)
-            while self.queued > self.queue_size and len(q) > 1:
+            while len(q) > 1 and (behind or self.queued > self.queue_size):
                 skipped = len(q.popleft().items) - self.head
                 self.head = 0
                 self.queued -= skipped
@@ -333,7 +339,7 @@ class Hub:
             return
         self.dispatches += 1
         self.last_publish_mono = time.monotonic()
-        block = Block(items)
+        block = Block(items, self.last_publish_mono)
         for c in self.clients:
             c.push(block)
 

@@ -105,6 +105,33 @@ def test_a_slow_client_skips_ahead_and_never_holds_the_others():
     assert hub.dropped == 500 - len(got_slow)
 
 
+def test_a_per_message_client_too_far_behind_skips_ahead_to_the_newest(monkeypatch):
+    monkeypatch.setattr("radar_io.service.hub.MAX_LAG_S", 0.05)
+
+    async def main() -> tuple[FakeWS, Hub]:
+        h = History()
+        hub = Hub(h, queue_size=10_000, interval_s=0.0)
+        hub.attach(asyncio.get_running_loop())
+        gate = asyncio.Event()
+        ws = FakeWS(gate)
+        task = asyncio.create_task(hub.register(ws, None, False).run(h, None))
+        for _ in range(3):  # 30 messages within 50 ms: kept
+            hub.publish_threadsafe(h.append(msgs(10, 10), encode_message))
+            await asyncio.sleep(0.005)
+        await asyncio.sleep(0.06)
+        hub.publish_threadsafe(h.append(msgs(10, 10), encode_message))  # 60 ms later
+        await asyncio.sleep(0.01)
+        gate.set()
+        await asyncio.sleep(0.05)
+        task.cancel()
+        return ws, hub
+
+    ws, hub = asyncio.run(main())
+    got = [json.loads(t)["msg_seq"] for t in ws.sent]
+    assert got == [1, *range(31, 41)]  # the one in flight, then the newest block
+    assert hub.dropped == 29  # 2..30
+
+
 def test_an_idle_loop_dispatches_each_read_at_once_a_busy_one_gathers():
     async def main() -> tuple[list[int], list[int], int, int]:
         h = History()
