@@ -45,9 +45,9 @@ from radar_io.service.history import History
 
 #: frames a client sends in one turn (one message per frame, or one array for batch clients)
 QUANTUM = 16
-#: frames all clients of one event loop send in one loop iteration, at most (~1-2 ms of
+#: frames all clients of one event loop send in one loop iteration, at most (~0.5-1 ms of
 #: websocket sends on a 2-core x86; then HTTP requests get their turn)
-ROUND_SENDS = 128
+ROUND_SENDS = 64
 #: a one-message-per-frame client whose oldest waiting message is older than this (s)
 #: skips ahead to the newest block (it cannot keep up: fresh data beats a growing lag)
 MAX_LAG_S = 1.0
@@ -108,7 +108,7 @@ def turns_for(loop: asyncio.AbstractEventLoop) -> SendTurns:
 class Block:
     """Messages published together: shared, immutable, the array text built once."""
 
-    __slots__ = ("items", "first", "last", "t_mono", "_array")
+    __slots__ = ("_array", "first", "items", "last", "t_mono")
 
     def __init__(self, items: list[tuple[int, str]], t_mono: float = 0.0) -> None:
         self.items = items
@@ -254,8 +254,10 @@ class Client:
                 continue
             data = bool(self.queue)
             await self._turn()
-            # a send that does not block never yields: the others' turns come first
-            await asyncio.sleep(self.min_interval if data else 0)
+            if self.min_interval and data:
+                await asyncio.sleep(self.min_interval)
+            elif self.queue or self.events:  # a send that does not block never yields:
+                await asyncio.sleep(0)        # the others' turns come first
 
 
 class Hub:

@@ -321,7 +321,7 @@ def test_a_flapping_limit_leaves_one_alarm_state_waiting_per_client(tmp_path):
                 while time.monotonic() < t_end:
                     try:
                         doc = json.loads(await asyncio.wait_for(ws.recv(), 0.2))
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         continue
                     if doc.get("type") == "alarm":
                         got.append(doc)

@@ -183,7 +183,7 @@ def test_a_minimum_spacing_when_ws_batch_interval_s_is_set():
 def test_alarm_states_coalesce_and_the_newest_goes_out():
     """A flapping limit: 1000 alarm states while a decimated client cannot send; only
     the newest waits, and it is what the client receives when it can send again."""
-    async def main() -> tuple[list[int], list[str], Hub]:
+    async def main() -> tuple[list[int], list[str]]:
         h = History()
         hub = Hub(h, interval_s=0.0)
         hub.attach(asyncio.get_running_loop())
@@ -200,9 +200,9 @@ def test_alarm_states_coalesce_and_the_newest_goes_out():
         gate.set()
         await asyncio.sleep(0.1)
         task.cancel()
-        return waiting, ws.sent, hub
+        return waiting, ws.sent
 
-    waiting, sent, hub = asyncio.run(main())
+    waiting, sent = asyncio.run(main())
     assert max(waiting) <= 2  # one alarm state and one (decimated) message
     alarms = [json.loads(t)["alarms"] for t in sent if '"type": "alarm"' in t]
     assert alarms[-1] == [999] and len(alarms) <= 3
