@@ -24,8 +24,9 @@ def add_subparser(sub: Any) -> None:
                    help="also decode an H-hour 1 kHz recording to Parquet and CSV through the "
                    "CLI beside pyarrow anchors (fresh processes, peak RSS); 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
-                   help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
-                   "/api/status latency, messages per client, lost, RSS; 0 to skip")
+                   help="also run N websocket clients (batch=1, or see --fanout-per-message) on "
+                   "a 1 kHz serve for 10 s: /api/status latency, messages per client, lost, "
+                   "RSS; 0 to skip")
     p.add_argument("--fanout-per-message", action="store_true",
                    help="the fan-out clients take one message per websocket frame (no batch=1)")
     p.add_argument("--core-only", action="store_true",

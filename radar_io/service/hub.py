@@ -50,7 +50,7 @@ QUANTUM = 16
 ROUND_SENDS = 64
 #: a one-message-per-frame client whose oldest waiting message is older than this (s)
 #: skips ahead to the newest block (it cannot keep up: fresh data beats a growing lag)
-MAX_LAG_S = 1.0
+MAX_LAG_S = 2.0
 
 
 class SendTurns:
@@ -149,7 +149,7 @@ class Client:
         if self.min_interval:  # decimated: only the newest matters
             q.clear()
             self.head = 0
-            q.append(Block([block.items[-1]]))
+            q.append(Block([block.items[-1]], block.t_mono))
             self.queued = 1
         else:
             behind = bool(q) and not self.batch and block.t_mono - q[0].t_mono > MAX_LAG_S
