@@ -374,8 +374,8 @@ def attach_alarms(svc: Any) -> AlarmEngine:
     publish = getattr(svc.hub, "publish_event_threadsafe", None)
 
     def on_change(alarms: list[dict[str, Any]]) -> None:
-        if publish is not None:  # the whole state: the hub keeps only the newest per client
-            publish(alarm_message(alarms), "alarm")
+        if publish is not None:
+            publish(alarm_message(alarms))
 
     engine = AlarmEngine(rules, builtin, on_change=on_change,
                          on_event=EventLog(svc.recorder.dir, lambda: svc.recorder.current))

@@ -46,9 +46,9 @@ from radar_io.service.history import History
 
 #: frames a client sends in one turn (one message per frame, or one array for batch clients)
 QUANTUM = 16
-#: frames all clients of one event loop send in one loop iteration, at most (~2-3 ms of
+#: frames all clients of one event loop send in one loop iteration, at most (~0.5-1 ms of
 #: websocket sends on a 2-core x86; then HTTP requests get their turn)
-ROUND_SENDS = 256
+ROUND_SENDS = 64
 #: dispatches are at least this far apart per connected client (s): a dispatch costs about
 #: one frame (~10 µs of sends) per client, so the dispatches of an idle stream take at most
 #: a quarter of the loop — 20 clients: 0.8 ms, 200 batch clients: 8 ms, larger blocks
