@@ -5,9 +5,10 @@ by the history) with :meth:`Hub.publish_threadsafe`. **Adaptive batching**: the 
 message after a dispatch schedules one dispatch on the event loop
 (``call_soon_threadsafe``); everything gathered until the loop runs it goes to every
 client as one shared :class:`Block`. An idle loop dispatches each read at once; a busy
-loop dispatches less often, in larger blocks, and so do many clients (dispatches are
-:data:`SPACING_PER_CLIENT_S` per client apart at least). ``interval_s`` > 0 sets a longer
-minimum spacing (``ws_batch_interval_s``; 0, the default, is adaptive).
+loop dispatches less often, in larger blocks, and so do many ``batch=1`` clients
+(dispatches are :data:`SPACING_PER_BATCH_CLIENT_S` per full-rate batch client apart at
+least). ``interval_s`` > 0 sets a longer minimum spacing (``ws_batch_interval_s``; 0, the
+default, is adaptive).
 
 **Turns** (:class:`SendTurns`, one per event loop, shared by every hub on it): a client
 sends at most :data:`QUANTUM` frames per turn, and the turns taken in one loop iteration
@@ -49,10 +50,10 @@ QUANTUM = 16
 #: frames all clients of one event loop send in one loop iteration, at most (~0.5-1 ms of
 #: websocket sends on a 2-core x86; then HTTP requests get their turn)
 ROUND_SENDS = 64
-#: dispatches are at least this far apart per connected client (s): a dispatch costs about
-#: one frame (~10 µs of sends) per client, so the dispatches of an idle stream take at most
-#: a quarter of the loop — 20 clients: 0.8 ms, 200 batch clients: 8 ms, larger blocks
-SPACING_PER_CLIENT_S = 40e-6
+#: dispatches are at least this far apart per full-rate ``batch=1`` client (s): such a
+#: client costs one frame per dispatch (the others: one per message, or ``max_hz`` at
+#: most), so 200 of them get 50 ms blocks (4 000 frames/s), 4 of them 1 ms blocks
+SPACING_PER_BATCH_CLIENT_S = 250e-6
 #: a one-message-per-frame client whose oldest waiting message is older than this (s)
 #: skips ahead to the newest block (it cannot keep up: fresh data beats a growing lag)
 MAX_LAG_S = 2.0
@@ -278,6 +279,7 @@ class Hub:
         self.clients: set[Client] = set()
         self.loop: asyncio.AbstractEventLoop | None = None
         self.turns: SendTurns | None = None
+        self.batch_clients = 0  #: full-rate batch=1 clients (they set the dispatch spacing)
         self.refused = 0
         self.undispatched = 0  #: messages dropped before dispatch (loop overloaded)
         self.max_pending = max(10 * queue_size, 20000)
@@ -295,9 +297,9 @@ class Hub:
 
     def _schedule(self, loop: asyncio.AbstractEventLoop) -> None:
         """One dispatch on the loop: as soon as it is free, but not sooner after the last than
-        ``interval_s`` or :data:`SPACING_PER_CLIENT_S` per client."""
+        ``interval_s`` or :data:`SPACING_PER_BATCH_CLIENT_S` per full-rate batch client."""
         try:
-            spacing = max(self.interval_s, len(self.clients) * SPACING_PER_CLIENT_S)
+            spacing = max(self.interval_s, self.batch_clients * SPACING_PER_BATCH_CLIENT_S)
             delay = self.last_publish_mono + spacing - time.monotonic()
             if delay > 0:
                 loop.call_soon_threadsafe(loop.call_later, delay, self._dispatch)
@@ -357,11 +359,13 @@ class Hub:
     def register(self, ws: WebSocket, max_hz: float | None, batch: bool = False) -> Client:
         c = Client(ws, self.queue_size, max_hz, batch, self.turns)
         self.clients.add(c)
+        self.batch_clients += batch and not max_hz
         return c
 
     def unregister(self, c: Client) -> None:
         if c in self.clients:
             self.clients.discard(c)
+            self.batch_clients -= c.batch and not c.min_interval
             self._dropped_closed += c.dropped
 
     @property
