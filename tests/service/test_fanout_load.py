@@ -13,7 +13,7 @@ def test_200_per_message_clients_leave_the_status_answering():
     than one event loop sends): ``/api/status`` polled every 50 ms answers with p99 ≤ 250 ms,
     and each client receives ≥ 10 % of the messages published meanwhile (the rest skipped
     ahead, counted in ``ws_dropped``)."""
-    fig = bench_fanout(clients=200, seconds=5.0, batch=False, settle_s=0.0)
+    fig = bench_fanout(clients=200, seconds=8.0, batch=False, settle_s=0.0)
     fig["load_average_1min"] = os.getloadavg()[0]
     assert fig["status_requests"] >= 20, fig
     assert fig["status_p99_ms"] <= 250.0, fig
