@@ -150,7 +150,8 @@ class Client:
         self.wake = asyncio.Event()
 
     def push(self, block: Block) -> None:
-        """Queue a block (event-loop thread); skip the oldest beyond ``queue_size`` messages."""
+        """Queue a block (event-loop thread); skip the oldest beyond ``queue_size`` messages,
+        and all but this block when the client is :data:`MAX_LAG_S` behind."""
         q = self.queue
         if self.min_interval:  # decimated: only the newest matters
             q.clear()
@@ -283,7 +284,7 @@ class Hub:
         self.refused = 0
         self.undispatched = 0  #: messages dropped before dispatch (loop overloaded)
         self.max_pending = max(10 * queue_size, 20000)
-        self.dispatches = 0
+        self.dispatches = 0  #: dispatches of messages so far
         self._dropped_closed = 0
         self._pending: list[tuple[int, str]] = []
         self._events: dict[str, str] = {}
