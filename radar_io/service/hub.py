@@ -6,8 +6,8 @@ message after a dispatch schedules one dispatch on the event loop
 (``call_soon_threadsafe``); everything gathered until the loop runs it goes to every
 client as one shared :class:`Block`. An idle loop dispatches each read at once; a busy
 loop dispatches less often, in larger blocks, and so do many ``batch=1`` clients
-(dispatches are :data:`SPACING_PER_BATCH_CLIENT_S` per full-rate batch client apart at
-least). ``interval_s`` > 0 sets a longer minimum spacing (``ws_batch_interval_s``; 0, the
+(dispatches are :data:`SPACING_PER_BATCH_CLIENT_S` apart per full-rate batch client
+beyond the first few). ``interval_s`` > 0 sets a longer minimum spacing (``ws_batch_interval_s``; 0, the
 default, is adaptive).
 
 **Turns** (:class:`SendTurns`, one per event loop, shared by every hub on it): a client
@@ -50,10 +50,12 @@ QUANTUM = 16
 #: frames all clients of one event loop send in one loop iteration, at most (~0.5-1 ms of
 #: websocket sends on a 2-core x86; then HTTP requests get their turn)
 ROUND_SENDS = 64
-#: dispatches are at least this far apart per full-rate ``batch=1`` client (s): such a
-#: client costs one frame per dispatch (the others: one per message, or ``max_hz`` at
-#: most), so 200 of them get 50 ms blocks (4 000 frames/s), 4 of them 1 ms blocks
+#: dispatches are at least this far apart per full-rate ``batch=1`` client beyond the
+#: first :data:`UNSPACED_BATCH_CLIENTS` (s): such a client costs one frame per dispatch
+#: (the others: one per message, or ``max_hz`` at most), so 200 of them get 48 ms blocks
+#: (~4 000 frames/s, as the old 50 ms tick), 20 of them 3 ms blocks, a few every read
 SPACING_PER_BATCH_CLIENT_S = 250e-6
+UNSPACED_BATCH_CLIENTS = 8
 #: a one-message-per-frame client whose oldest waiting message is older than this (s)
 #: skips ahead to the newest block (it cannot keep up: fresh data beats a growing lag)
 MAX_LAG_S = 2.0
@@ -298,9 +300,11 @@ class Hub:
 
     def _schedule(self, loop: asyncio.AbstractEventLoop) -> None:
         """One dispatch on the loop: as soon as it is free, but not sooner after the last than
-        ``interval_s`` or :data:`SPACING_PER_BATCH_CLIENT_S` per full-rate batch client."""
+        ``interval_s`` or :data:`SPACING_PER_BATCH_CLIENT_S` per full-rate batch client
+        beyond the first few."""
         try:
-            spacing = max(self.interval_s, self.batch_clients * SPACING_PER_BATCH_CLIENT_S)
+            beyond = max(0, self.batch_clients - UNSPACED_BATCH_CLIENTS)
+            spacing = max(self.interval_s, beyond * SPACING_PER_BATCH_CLIENT_S)
             delay = self.last_publish_mono + spacing - time.monotonic()
             if delay > 0:
                 loop.call_soon_threadsafe(loop.call_later, delay, self._dispatch)
