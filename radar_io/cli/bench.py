@@ -35,8 +35,11 @@ def add_subparser(sub: Any) -> None:
                    "CLI (fresh processes: first with numba compiling, then cached; peak RSS) "
                    "beside Stone Soup's EKF + smoother per measurement; 0 to skip")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
-                   help="also run N websocket clients (batch mode) on a 1 kHz serve for 10 s: "
-                   "/api/status latency, messages per client, lost, RSS; 0 to skip")
+                   help="also run N websocket clients (batch=1, or see --fanout-per-message) on "
+                   "a 1 kHz serve for 10 s: /api/status latency, messages per client, lost, "
+                   "RSS; 0 to skip")
+    p.add_argument("--fanout-per-message", action="store_true",
+                   help="the fan-out clients take one message per websocket frame (no batch=1)")
     p.add_argument("--expensive-clients", type=int, default=0, metavar="N",
                    help="also fire N concurrent flight-report requests, then N/2 sync-event "
                    "queries, of one recording at a fresh serve: answers (429 + Retry-After "
@@ -77,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 
-        fan = result["fanout"] = bench_fanout(args.fanout_clients)
+        fan = result["fanout"] = bench_fanout(args.fanout_clients,
+                                              batch=not args.fanout_per_message)
         lines.append(f"fan-out {args.fanout_clients} clients: " + ", ".join(
             f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
             for k, v in fan.items() if not isinstance(v, (dict, list))))

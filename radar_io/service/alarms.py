@@ -379,7 +379,8 @@ def read_events(path: Path) -> list[dict[str, Any]]:
 def attach_alarms(svc: Any) -> AlarmEngine:
     """An engine for a :class:`~radar_io.service.state.ServiceState`: rules from ``cfg.alarms``,
     fed the decoded messages (an acquisition processor), events to the open recording's
-    event log, changes pushed on the websocket. Start :func:`status_loop` in the lifespan."""
+    event log, changes pushed on the websocket (coalesced per client: a flapping limit
+    costs a client one waiting message). Start :func:`status_loop` in the lifespan."""
     from radar_io.coordinates.reference_path import DEVIATION_COLUMNS
     from radar_io.decoding.model import output_columns
 

@@ -47,7 +47,7 @@ class ServiceConfig:
     history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)
     ws_queue_size: Annotated[int, Ge(1), Le(1_000_000)] = 5000  #: per client; oldest skipped beyond
     ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
-    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.05  #: fan-out tick (s)
+    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.0  #: 0: adaptive; > 0: minimum spacing of fan-out dispatches (s)
     max_replays: Annotated[int, Ge(0), Le(64)] = 4  #: replay sessions at once (429 beyond)
     replay_idle_s: Annotated[float, Gt(0.0), Le(86400.0)] = 300.0  #: a session nobody watches ends
     allowed_origins: list[str] = field(default_factory=list)  #: besides the same host

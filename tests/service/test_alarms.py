@@ -271,3 +271,82 @@ def test_serve_refuses_a_bad_alarm_entry_in_one_line(tmp_path):
     err = r.stderr.decode().strip()
     assert r.returncode == 2 and len(err.splitlines()) == 1, err
     assert "alarms[0]: column 'height_m' is not a decoded column" in err
+
+
+def test_a_flapping_limit_leaves_one_alarm_state_waiting_per_client(tmp_path):
+    """A range limit flapping at its threshold for 3 s (a frame each ms over a pty, about
+    1000 alarm changes/s): a ``max_hz=25`` client that reads and one that never reads each
+    hold at most one alarm state waiting, the reader gets alarms at about its own rate, and
+    the last alarm message it receives is the current state."""
+    import threading
+
+    import independent
+    import websockets
+
+    from radar_io.benchmarks.service_load import Pty, _stalled
+
+    from .liveserver import live_server, service_config
+
+    pty = Pty()
+    cfg = service_config(tmp_path, source=pty.path, auto_record="manual",
+                         alarms=[{"column": "sr_m", "max": 5000.0, "name": "range"},
+                                 {"builtin": "source_stale", "enabled": False},
+                                 {"builtin": "low_disk", "enabled": False}])
+    flap_s = 3.0
+    with live_server(cfg) as srv:
+        hub = srv.app.state.service.hub
+        waiting: list[int] = []
+        stop_sampling = threading.Event()
+
+        def sample() -> None:  # the most alarm states any client has waiting, every 5 ms
+            while not stop_sampling.wait(0.005):
+                waiting.append(max((len(c.events) for c in list(hub.clients)), default=0))
+
+        def flap() -> None:  # 4990 / 5010 m alternately for flap_s, then 5010 m (raised)
+            t0 = time.monotonic()
+            k = 0
+            while (elapsed := time.monotonic() - t0) < flap_s + 0.3:
+                sr = 5010 if elapsed >= flap_s or k % 2 else 4990
+                pty.write(independent.frame(seq=k, tod=k * 10, sr=sr, sts=0x0004))
+                k += 1
+                time.sleep(0.001)
+
+        async def main() -> list[dict]:
+            url = srv.base.replace("http", "ws") + "/ws/live?max_hz=25"
+            done, ready = asyncio.Event(), asyncio.Event()
+            stall = asyncio.create_task(_stalled(url, done, ready, [0, 1]))
+            await ready.wait()
+            got: list[dict] = []
+            async with websockets.connect(url) as ws:
+                writer = asyncio.create_task(asyncio.to_thread(flap))
+                t_end = time.monotonic() + 30.0
+                while time.monotonic() < t_end:
+                    try:
+                        doc = json.loads(await asyncio.wait_for(ws.recv(), 0.2))
+                    except TimeoutError:
+                        continue
+                    if doc.get("type") == "alarm":
+                        got.append(doc)
+                    if writer.done() and t_end - time.monotonic() > 1.0:
+                        t_end = time.monotonic() + 1.0  # what is still on its way
+                await writer
+            done.set()
+            await stall
+            return got
+
+        sampler = threading.Thread(target=sample)
+        sampler.start()
+        try:
+            got = asyncio.run(main())
+        finally:
+            stop_sampling.set()
+            sampler.join()
+            pty.close()
+        current = srv.get("/api/alarms")["alarms"]
+    changes = [e for e in srv.app.state.service.alarms.events if e["action"] in ("raise", "clear")]
+    assert len(changes) > 500, len(changes)  # it did flap, hundreds of times a second
+    assert max(waiting) <= 1
+    assert 10 <= len(got) <= 25 * (flap_s + 1.5), len(got)  # about max_hz, not 1000/s
+    assert [a["id"] for a in current] == ["limit:sr_m"]
+    last = got[-1]["alarms"]
+    assert [(a["id"], a["since"]) for a in last] == [(a["id"], a["since"]) for a in current]

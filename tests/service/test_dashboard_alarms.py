@@ -8,7 +8,6 @@ real websocket."""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import time
 import urllib.request
@@ -99,13 +98,13 @@ def websocket_alarms(sim_server, browser) -> None:  # noqa: F811
     browser.wait_for("radarState.connected && radarAlarms.endpoint === false", 10)
     svc = sim_server.app.state.service
 
-    def push(alarms: list[dict[str, Any]]) -> None:
-        text = json.dumps({"type": "alarm", "alarms": alarms})
-        for c in list(svc.hub.clients):
-            asyncio.run_coroutine_threadsafe(c.ws.send_text(text), svc.hub.loop).result(5)
+    def push(alarms: list[dict[str, Any]]) -> None:  # the way the alarm engine does
+        svc.hub.publish_event_threadsafe(json.dumps({"type": "alarm", "alarms": alarms}))
 
-    push([{"id": "crc", "name": "CRC error rate", "column": None, "value": 0.12, "limit": 0.01,
-           "since": time.time(), "acknowledged": False}])
+    crc = {"id": "crc", "name": "CRC error rate", "column": None, "value": 0.12, "limit": 0.01,
+           "since": time.time(), "acknowledged": False}
+    for k in range(300):  # flapping: the states coalesce, the newest one is shown
+        push([crc] if k % 2 else [])
     browser.wait_for(f"!{BANNER}.hidden && {BANNER}.textContent.includes('CRC error rate')", 5)
     n = browser.eval("radarState.received")
     browser.wait_for(f"radarState.received > {n + 5}", 5)  # measurements still flow

@@ -38,6 +38,8 @@ def wait_for(pred, timeout_s: float = 20.0, what: str = "condition"):
 
 
 def test_1000_frames_per_s_reach_19_readers_intact_with_one_client_stalled(tmp_path):
+    """The default fan-out (adaptive batching): every message to every reader, pty write →
+    websocket receipt p99 ≤ 5 ms (issue 20), the stalled client costing the others nothing."""
     cfg = tmp_path / "serve.toml"
     cfg.write_text('ws_queue_size = 3000\nauto_record = "manual"\n')
     pty = Pty()
@@ -63,10 +65,12 @@ def test_1000_frames_per_s_reach_19_readers_intact_with_one_client_stalled(tmp_p
                 else:
                     assert m[col] == pytest.approx(want[col], rel=1e-12, abs=1e-9), col
     lat = res.latencies_ms()
+    figures = {"p50_ms": float(np.percentile(lat, 50)), "p99_ms": float(np.percentile(lat, 99)),
+               "max_ms": float(lat.max()), "messages": int(lat.size),
+               "load_average_1min": os.getloadavg()[0]}
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    (ARTIFACTS / "ws_latency.json").write_text(json.dumps({
-        "p50_ms": float(np.percentile(lat, 50)), "p99_ms": float(np.percentile(lat, 99)),
-        "max_ms": float(lat.max()), "messages": int(lat.size)}, indent=2))
+    (ARTIFACTS / "ws_latency.json").write_text(json.dumps(figures, indent=2))
+    assert figures["p99_ms"] <= 5.0, figures
 
 
 def test_a_stalled_client_drops_its_own_display_updates_only(tmp_path):
