@@ -20,7 +20,7 @@ from pathlib import Path
 
 import independent
 import pytest
-from conftest import require_program
+from conftest import require_program, timing_bound
 
 from radar_io.benchmarks.service_load import Pty, ServeProcess, end_process
 from radar_io.framing.framers import Framer
@@ -173,4 +173,4 @@ def test_fsync_delayed_2_s_never_stalls_the_live_stream(tmp_path):
           f"caught up {backlog_s:.1f} s after the last frame; load {load:.1f} per core")
     # the bound is for a machine with CPU to spare; on an overloaded one the scheduler's own
     # stalls dominate, and what is left to show is that no fsync (2 s) reaches the stream
-    assert stall_ms <= 20.0 or (load > 1.0 and stall_ms < 1000.0), stall_ms
+    assert stall_ms <= timing_bound(20.0, 1000.0), stall_ms
