@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 
 from conftest import timing_bound
+
 from radar_io.benchmarks.service_load import bench_fanout
 
 
