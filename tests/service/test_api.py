@@ -146,9 +146,10 @@ def test_recordings_list_download_404_and_traversal(svc):
     with urllib.request.urlopen(f"{svc.base}/api/recordings/{rec}", timeout=10) as r:
         body = r.read()
     assert body == (svc.data / "recordings" / f"{rec}.rdrlog").read_bytes()
-    # the download's limiter slot is back once it was sent
-    assert svc.get("/api/status")["expensive"]["downloads"] == {"running": 0, "limit": 4,
-                                                                 "refused": 0}
+    # the download's limiter slot is back once it was sent (freed when the server's last send
+    # returns, which may be just after the client has read the body)
+    wait_for(lambda: svc.get("/api/status")["expensive"]["downloads"] == {
+        "running": 0, "limit": 4, "refused": 0}, what="the download's limiter slot back")
     assert call(svc, "GET", "/api/recordings/nope")[0] == 404
     for bad in ("..%2F..%2Fetc%2Fpasswd", "a..b", "%2Fetc%2Fpasswd"):
         code, _ = call(svc, "GET", f"/api/recordings/{bad}")
