@@ -10,13 +10,19 @@ import types
 
 import numpy as np
 import pytest
-
 from conftest import ROOT, run_cli
+
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.decoders import decode_bytes
-from radar_io.encoding.asterix_cat048 import (HEIGHT_LSB_M, RHO_LSB_M, THETA_LSB_DEG,
-                                              TOD_LSB_S, Cat048Encoder, decode_records,
-                                              write_asterix)
+from radar_io.encoding.asterix_cat048 import (
+    HEIGHT_LSB_M,
+    RHO_LSB_M,
+    THETA_LSB_DEG,
+    TOD_LSB_S,
+    Cat048Encoder,
+    decode_records,
+    write_asterix,
+)
 from radar_io.errors import ConfigError, EncodeError
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 from radar_io.sinks import open_sink
@@ -174,10 +180,9 @@ def test_file_writer_appears_only_when_complete(tmp_path):
     batch = flight(2000, seed=5)
     cols = {c: batch[c] for c in batch.columns}
     out = tmp_path / "run.ast"
-    with pytest.raises(RuntimeError):
-        with AsterixFileWriter(str(out), metadata={"site": "demo"}) as w:
-            w.write(cols)
-            raise RuntimeError("interrupted")
+    with pytest.raises(RuntimeError), AsterixFileWriter(str(out), metadata={"site": "demo"}) as w:
+        w.write(cols)
+        raise RuntimeError("interrupted")
     assert list(tmp_path.iterdir()) == []          # aborted: no file, no leftover part
     w = AsterixFileWriter(str(out), site=types.SimpleNamespace(asterix_sac=3, asterix_sic=4))
     w.open()

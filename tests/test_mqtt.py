@@ -19,14 +19,14 @@ from pathlib import Path
 
 import paho.mqtt.client as paho
 import pytest
-
 from conftest import ROOT
+
 from radar_io.benchmarks.service_load import end_process
 from radar_io.coordinates.transforms import load_site
 from radar_io.errors import ConfigError
 from radar_io.recording.recorder import Recorder
-from radar_io.service.pipeline import Pipeline as ServicePipeline
 from radar_io.service.history import History
+from radar_io.service.pipeline import Pipeline as ServicePipeline
 from radar_io.sinks import open_sink
 from radar_io.sinks.mqtt import MqttPublisher, parse_mqtt_url
 from radar_io.wirespec.frame import load_spec
@@ -340,6 +340,7 @@ def test_service_wiring_publishes_what_api_track_serves(broker, tmp_path):
 
     import numpy as np
     import uvicorn
+
     from radar_io.encoding.asterix_cat048 import RHO_LSB_M, THETA_LSB_DEG, decode_records
     from radar_io.service.app import build_app
     from radar_io.service.config import ServiceConfig
@@ -415,12 +416,13 @@ def test_ground_replay_outputs_say_the_data_is_not_live(broker, tmp_path):
 
     import uvicorn
     from conftest import require_program
+    from test_asterix import tshark_fields, write_pcap
+
     from radar_io.encoding.asterix_cat048 import decode_records
     from radar_io.recording.rdrlog import RecordingWriter
     from radar_io.service.app import build_app
     from radar_io.service.config import ServiceConfig
     from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
-    from test_asterix import tshark_fields, write_pcap
 
     require_program("tshark")
     data, _ = RadarSimulator(FlightScript(), SimConfig(seed=4, go_delay_s=0.0,

@@ -10,15 +10,20 @@ import sys
 import textwrap
 import time
 
+import independent
 import numpy as np
 import pytest
 
-import independent
+from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.decoders import decode_bytes, iter_decode
 from radar_io.errors import RecordingError
-from radar_io.coordinates.transforms import load_site
-from radar_io.recording.rdrlog import (RecordingReader, RecordingWriter, encode_chunk, is_recording,
-                                iter_payloads)
+from radar_io.recording.rdrlog import (
+    RecordingReader,
+    RecordingWriter,
+    encode_chunk,
+    is_recording,
+    iter_payloads,
+)
 from radar_io.wirespec.frame import spec_dir
 
 

@@ -6,10 +6,11 @@ from __future__ import annotations
 import time
 
 import independent
+
 from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.recording.recorder import Recorder
-from radar_io.service.pipeline import Pipeline
 from radar_io.service.history import History
+from radar_io.service.pipeline import Pipeline
 
 N = 3000
 CHUNK = 777  # serial-read-sized chunks: frames (24 bytes) split across them

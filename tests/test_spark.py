@@ -49,7 +49,7 @@ def spark_results(spark, archived):  # noqa: F811 (the imported fixture)
     assert code.count('"s3a://range/archive"') == 1
     ns: dict = {}
     src = code.replace('"s3a://range/archive"', repr(str(out)))
-    exec(compile(src, "analysis.md", "exec"), ns)  # noqa: S102 - the doc's own example
+    exec(compile(src, "analysis.md", "exec"), ns)  # the doc's own example
     return {name: [tuple(r) for r in ns[name].collect()] for name in ("runs", "bias", "crc")}
 
 

@@ -357,7 +357,7 @@ def _table_pages(pdf: Any, title: str, head: tuple[str, ...] | None,
     for k in range(0, max(len(rows), 1), per_page):
         chunk = rows[k:k + per_page] or [("(none)",) + ("",) * (len(head or ("",)) - 1)]
         fig = plt.figure(figsize=(8.27, 11.69))
-        fig.text(0.05, 0.96, title + (f" (continued)" if k else ""), fontsize=13,
+        fig.text(0.05, 0.96, title + (" (continued)" if k else ""), fontsize=13,
                  weight="bold")
         ax = fig.add_axes((0.03, 0.03, 0.94, 0.9))
         ax.axis("off")

@@ -463,7 +463,7 @@ class SeriesIndex:
                                   f"{', '.join(self._columns)}")
         if not names:
             raise ValidationError("columns: give at least one column")
-        if not 1 <= points:
+        if points < 1:
             raise ValidationError(f"points must be at least 1, got {points}")
         for what, v in (("start_s", start_s), ("end_s", end_s)):
             if v is not None and not math.isfinite(v):

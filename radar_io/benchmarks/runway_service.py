@@ -70,7 +70,7 @@ def run(frames: int, clients: int) -> dict[str, Any]:
                 while not stop.is_set():
                     try:
                         text = await asyncio.wait_for(ws.recv(), 1.0)
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         continue
                     doc = json.loads(text)
                     for m in doc if isinstance(doc, list) else [doc]:

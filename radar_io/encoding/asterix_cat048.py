@@ -78,7 +78,7 @@ class Cat048Encoder:
         self.saturation = {"rho": 0, "height": 0}
 
     @classmethod
-    def for_site(cls, site: Any, **options: Any) -> "Cat048Encoder":
+    def for_site(cls, site: Any, **options: Any) -> Cat048Encoder:
         """SAC/SIC from the site (``Site.asterix_sac/asterix_sic``; 0 when absent)."""
         where = f"site {getattr(site, 'name', '?')} [asterix]"
         return cls(check_code("sac", getattr(site, "asterix_sac", 0) or 0, where),

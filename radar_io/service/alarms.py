@@ -432,6 +432,6 @@ async def status_loop(svc: Any, engine: AlarmEngine, period_s: float = 0.25) -> 
             if current is not None and current != recording:
                 engine.snapshot()
             recording = current
-        except Exception:  # noqa: BLE001 - a failing check must not end the loop
+        except Exception:  # a failing check must not end the loop
             logging.getLogger("radar_io.alarms").exception("alarm status check failed")
         await asyncio.sleep(period_s)

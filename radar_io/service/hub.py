@@ -26,7 +26,6 @@ from starlette.websockets import WebSocket
 
 from radar_io.service.history import History
 
-
 #: a one-message-per-frame client yields to the loop after this many sends
 YIELD_EVERY = 16
 
@@ -34,7 +33,7 @@ YIELD_EVERY = 16
 class Block:
     """Messages published together: shared, immutable, the array text built once."""
 
-    __slots__ = ("items", "first", "last", "_array")
+    __slots__ = ("_array", "first", "items", "last")
 
     def __init__(self, items: list[tuple[int, str]]) -> None:
         self.items = items

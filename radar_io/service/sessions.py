@@ -200,7 +200,7 @@ class ReplaySessions:
         while not self._stop.wait(period):
             try:
                 self.reap()
-            except Exception:  # noqa: BLE001 - the reaper must keep running
+            except Exception:  # the reaper must keep running
                 log.exception("reaping replay sessions")
 
     def close(self) -> None:

@@ -23,19 +23,19 @@ from pathlib import Path
 from typing import Any
 
 from radar_io import __version__
+from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.biases import load_calibration
 from radar_io.errors import ConfigError, NotFoundError, ValidationError
-from radar_io.coordinates.transforms import load_site
 from radar_io.recording.recorder import Recorder
 from radar_io.service.calibrations import CalibrationStore
 from radar_io.service.clock import ClockSync
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
+from radar_io.service.limits import KIND_KEYS, ExpensiveLimiter
 from radar_io.service.pipeline import Pipeline, Processor
 from radar_io.service.sessions import ReplaySessions
 from radar_io.sources import source_kind
-from radar_io.service.limits import KIND_KEYS, ExpensiveLimiter
 from radar_io.wirespec.frame import load_spec
 
 log = logging.getLogger("radar_io.service")

@@ -14,9 +14,8 @@ import os
 import sys
 from typing import IO, Any
 
-from radar_io.errors import StorageError
-
 from radar_io.encoding.asterix_cat048 import Cat048Encoder
+from radar_io.errors import StorageError
 from radar_io.sinks.atomic import AtomicFile
 from radar_io.sinks.base import Batch, EncoderSink, Sink
 

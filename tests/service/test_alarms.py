@@ -13,8 +13,7 @@ import urllib.request
 import pytest
 
 from radar_io.errors import ConfigError, NotFoundError
-from radar_io.service.alarms import (AlarmEngine, LimitRule, alarm_message, parse_alarm_config,
-                                     read_events)
+from radar_io.service.alarms import AlarmEngine, LimitRule, alarm_message, parse_alarm_config, read_events
 
 T0 = 1_800_000_000.0
 

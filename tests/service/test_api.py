@@ -15,8 +15,8 @@ import urllib.request
 import pytest
 import websockets
 
-from radar_io.recording.rdrlog import RecordingReader
 from radar_io.benchmarks.service_load import ServeProcess
+from radar_io.recording.rdrlog import RecordingReader
 
 from .test_live_pty import wait_for
 

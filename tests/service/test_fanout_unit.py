@@ -11,9 +11,9 @@ import pytest
 
 from radar_io.calibration.pairing import estimate_bias
 from radar_io.errors import ValidationError
-from radar_io.service.pipeline import encode_message
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
+from radar_io.service.pipeline import encode_message
 
 
 def msgs(n: int, pad: int = 100) -> list[dict]:

@@ -17,8 +17,8 @@ import uuid
 import numpy as np
 import pytest
 import uvicorn
-
 from conftest import fly_on_virtual_bus
+
 from radar_io.service.app import create_app
 from radar_io.service.config import ServiceConfig
 from radar_io.wirespec.frame import spec_dir

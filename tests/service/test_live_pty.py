@@ -8,13 +8,13 @@ import time
 import urllib.request
 from pathlib import Path
 
+import independent
 import numpy as np
 import pytest
 
-import independent
+from radar_io.benchmarks.service_load import Pty, ServeProcess, run_load
 from radar_io.decoding.decoders import DECODE_COLUMNS
 from radar_io.recording.rdrlog import RecordingReader
-from radar_io.benchmarks.service_load import Pty, ServeProcess, run_load
 
 ARTIFACTS = Path(os.environ.get("RADAR_IO_ARTIFACTS", Path(__file__).resolve().parents[2] / "artifacts"))
 
