@@ -67,7 +67,7 @@ def tshark_fields(pcap) -> dict[str, np.ndarray]:
     """Every CAT048 record's fields as tshark decodes them (one column per field)."""
     res = subprocess.run([TSHARK, "-n", "-r", str(pcap), "-d", f"udp.port=={PORT},asterix",
                           "-T", "fields", "-E", "occurrence=a", "-E", "aggregator=;",
-                          *sum((["-e", f] for f in FIELDS), [])],
+                          *(a for f in FIELDS for a in ("-e", f))],
                          capture_output=True, text=True, timeout=300, check=True)
     cols: dict[str, list[float]] = {f: [] for f in FIELDS}
     for line in res.stdout.splitlines():
@@ -76,7 +76,7 @@ def tshark_fields(pcap) -> dict[str, np.ndarray]:
         n = len(vals[1])
         assert all(len(v) == n for v in vals[1:]), line[:200]
         cols[FIELDS[0]] += [_num(vals[0][0])] * n
-        for f, v in zip(FIELDS[1:], vals[1:]):
+        for f, v in zip(FIELDS[1:], vals[1:], strict=True):
             cols[f] += [_num(x) for x in v]
     return {f: np.array(v) for f, v in cols.items()}
 
@@ -142,7 +142,7 @@ def test_bad_sac_and_missing_columns_are_one_line():
     assert "\n" not in str(ei.value) and "north" in str(ei.value)
     with pytest.raises(ConfigError, match="sic"):
         Cat048Encoder(1, -1)
-    with pytest.raises(EncodeError, match="h_m .*--site"):
+    with pytest.raises(EncodeError, match=r"h_m .*--site"):
         Cat048Encoder().encode_batch({"tod_s": np.zeros(1), "rx_good": np.ones(1),
                                       "go": np.ones(1), "sr_c_m": np.ones(1),
                                       "az_c_deg": np.ones(1)})

@@ -62,10 +62,9 @@ class Broker:
                     self.port = s.getsockname()[1]
             conf = self.tmp / "mosquitto.conf"
             conf.write_text(f"listener {self.port} 127.0.0.1\n{self.extra}persistence false\n")
-            log = open(self.tmp / "mosquitto.log", "ab")
-            self.proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=log,
-                                         stderr=subprocess.STDOUT)
-            log.close()
+            with open(self.tmp / "mosquitto.log", "ab") as log:
+                self.proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=log,
+                                             stderr=subprocess.STDOUT)
             if wait_for(self._listening, 10):
                 return
             self.stop()

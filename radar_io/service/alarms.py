@@ -188,10 +188,10 @@ class AlarmEngine:
 
     def check_status(self, status: dict[str, Any], now_s: float | None = None,
                      mono_s: float | None = None) -> None:
-        """Built-in alarms from the service status dict (see :meth:`~radar_io.service.state.ServiceState.status`) and
-        ``disk_free_bytes``; ``now_s``: wall clock (a label), ``mono_s``: monotonic clock for
-        the CRC window and waits (default ``time.monotonic()``, or ``now_s`` when only that
-        is given)."""
+        """Built-in alarms from the service status dict (see
+        :meth:`~radar_io.service.state.ServiceState.status`) and ``disk_free_bytes``;
+        ``now_s``: wall clock (a label), ``mono_s``: monotonic clock for the CRC window and
+        waits (default ``time.monotonic()``, or ``now_s`` when only that is given)."""
         now = time.time() if now_s is None else now_s  # a label
         mono = mono_s if mono_s is not None else (time.monotonic() if now_s is None else now_s)
         with self._lock:

@@ -41,7 +41,8 @@ class ServiceConfig:
     preroll_s: Annotated[float, Ge(0.0), Le(600.0)] = 2.0
     retry_s: Annotated[float, Gt(0.0), Le(3600.0)] = 5.0  #: automatic recording: retry after a disk error
     low_space_mb: Annotated[float, Ge(0.0)] = 1024.0      #: status storage.low_space below this free space
-    recording_buffer_mb: Annotated[float, Gt(0.0), Le(65536.0)] = 64.0  #: chunks held while the disk fails (MiB)
+    #: chunks held while the disk fails (MiB)
+    recording_buffer_mb: Annotated[float, Gt(0.0), Le(65536.0)] = 64.0
     runway_queue: Annotated[int, Ge(0), Le(100)] = 2      #: runway video jobs waiting (429 beyond)
     runway_job_timeout_s: Annotated[float, Gt(0.0), Le(86400.0)] = 1800.0  #: one video job (s)
     history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)

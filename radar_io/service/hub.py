@@ -8,7 +8,8 @@ the recording is never affected: it was written by the reader thread before deco
 
 Per client: ``batch`` clients receive one JSON array per block (the array text is built
 once per block, shared by all of them; when several blocks wait because the loop is
-busy, they go as one frame, so a loaded server sends fewer, larger frames); the others one message per websocket frame;
+busy, they go as one frame, so a loaded server sends fewer, larger frames); the others one
+message per websocket frame;
 ``max_hz`` clients get the newest message at most that often. A client that resumes
 with ``from=N`` first receives every message after N still in the history, then the
 live stream, without duplicates.

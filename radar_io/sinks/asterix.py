@@ -77,7 +77,7 @@ class AsterixFileWriter(Sink):
             self._out = sys.stdout.buffer
             return
         self._atomic = AtomicFile(self.target)  # the table writers' temporary-name file
-        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)
+        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)  # noqa: SIM115 - until close()
 
     def write(self, batch: Batch) -> int:
         if self._out is None:

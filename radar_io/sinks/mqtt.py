@@ -370,7 +370,8 @@ class MqttSink(Sink):
         if n == 0:
             return 0
         cols = [np.asarray(batch[c]) for c in names]
-        rows = [dict(zip(names, vals)) for vals in zip(*(c.tolist() for c in cols))]
+        rows = [dict(zip(names, vals, strict=True))
+                for vals in zip(*(c.tolist() for c in cols), strict=True)]
         items = []
         for r in rows:
             self._count += 1

@@ -84,7 +84,7 @@ class ReplaySource:
 
     def open(self) -> None:
         try:
-            self._f = open(self.path, "rb")
+            self._f = open(self.path, "rb")  # noqa: SIM115 - held until close()
         except OSError as exc:
             raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from exc
         self._anchor = None

@@ -248,7 +248,7 @@ def test_alarm_changes_are_pushed_on_the_websocket(svc):
 
 
 def test_report_endpoint_html_and_pdf(svc):
-    recs = _wait(lambda: [r for r in json.loads(_call(svc, "GET", "/api/recordings")[2])])
+    recs = _wait(lambda: list(json.loads(_call(svc, "GET", "/api/recordings")[2])))
     rid = recs[0]["id"]
     time.sleep(1.0)
     code, ctype, body = _call(svc, "GET", f"/api/recordings/{rid}/report")
