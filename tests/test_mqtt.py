@@ -281,16 +281,22 @@ def test_broker_restart_resumes_and_counts_the_gap(broker, tmp_path):
 def test_registry_sink_publishes_rows(broker):
     import numpy as np
 
+    from radar_io.decoding.measurement import MeasurementBatch
+
     sub = Subscriber(broker.port, "reg")
     sink = open_sink("mqtt", f"mqtt://127.0.0.1:{broker.port}/reg?qos=0")
     try:
         assert wait_for(lambda: sink.stats()["connected"], 10)
         sink.write({"msg_seq": np.array([7, 8]), "sr_m": np.array([1000.0, np.nan])})
-        assert wait_for(lambda: len(sub.track) == 2, 10)
+        # a decoded batch (what decode_bytes returns) is columns too, though not a Mapping
+        assert sink.write(MeasurementBatch({"msg_seq": np.array([9]),
+                                            "sr_m": np.array([1200.0])})) == 1
+        assert wait_for(lambda: len(sub.track) == 3, 10)
     finally:
         sink.close()
         sub.close()
-    assert sub.track == [{"msg_seq": 7, "sr_m": 1000.0}, {"msg_seq": 8, "sr_m": None}]
+    assert sub.track == [{"msg_seq": 7, "sr_m": 1000.0}, {"msg_seq": 8, "sr_m": None},
+                         {"msg_seq": 9, "sr_m": 1200.0}]
 
 
 def test_mqtts_with_user_and_password_from_the_environment(tmp_path, monkeypatch, caplog):

@@ -188,7 +188,7 @@ def run_bench(frames: int = 2_000_000, repeat: int = 5, per_frame_frames: int = 
         res.update(bench_service(serve_seconds))
     if include_plugins and importlib.util.find_spec("radar_io.vision") is not None:
         try:
-            from radar_io.benchmarks.runway import bench_runway  # type: ignore[import-not-found]
+            from radar_io.benchmarks.runway import bench_runway
 
             res.update(bench_runway())
         except ImportError:

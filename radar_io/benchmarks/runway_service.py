@@ -36,7 +36,7 @@ def make_video(path: Path, frames: int, width: int = 640, height: int = 480) -> 
     f = focal_for_fov(width, 60.0)
     imgs = [render_runway(RunwayPose(5.0, -4.0, 3.0, 60.0 - k, 10.0), width, height, f)
             for k in range(20)]
-    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (width, height), False)
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 25, (width, height), False)
     for i in range(frames):
         vw.write(imgs[i % 20])
     vw.release()

@@ -156,7 +156,7 @@ async def _reader(url: str, out: list[tuple[int, int, dict[str, Any]]], n: int,
         counter[0] += 1
         if counter[0] >= counter[1]:
             ready.set()
-        raw = []
+        raw: list[tuple[int, str | bytes]] = []
         while len(raw) < n:
             text = await ws.recv()
             raw.append((time.time_ns(), text))

@@ -384,7 +384,7 @@ class RecordingReader:
     def _unpack(self, head: bytes) -> tuple[bytes, int, int, int, int]:
         """magic, t_ns, mono_ns, length, crc of a chunk header of this file's version."""
         if self.version == 2:
-            return _CHUNK_HEAD.unpack(head)  # type: ignore[no-any-return]
+            return _CHUNK_HEAD.unpack(head)
         magic, t_ns, length, crc = _CHUNK_HEAD_V1.unpack(head)
         return magic, t_ns, t_ns, length, crc
 
