@@ -10,13 +10,19 @@ import types
 
 import numpy as np
 import pytest
-
 from conftest import ROOT, run_cli
+
 from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.decoders import decode_bytes
-from radar_io.encoding.asterix_cat048 import (HEIGHT_LSB_M, RHO_LSB_M, THETA_LSB_DEG,
-                                              TOD_LSB_S, Cat048Encoder, decode_records,
-                                              write_asterix)
+from radar_io.encoding.asterix_cat048 import (
+    HEIGHT_LSB_M,
+    RHO_LSB_M,
+    THETA_LSB_DEG,
+    TOD_LSB_S,
+    Cat048Encoder,
+    decode_records,
+    write_asterix,
+)
 from radar_io.errors import ConfigError, EncodeError
 from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
 from radar_io.sinks import open_sink
@@ -61,7 +67,7 @@ def tshark_fields(pcap) -> dict[str, np.ndarray]:
     """Every CAT048 record's fields as tshark decodes them (one column per field)."""
     res = subprocess.run([TSHARK, "-n", "-r", str(pcap), "-d", f"udp.port=={PORT},asterix",
                           "-T", "fields", "-E", "occurrence=a", "-E", "aggregator=;",
-                          *sum((["-e", f] for f in FIELDS), [])],
+                          *(a for f in FIELDS for a in ("-e", f))],
                          capture_output=True, text=True, timeout=300, check=True)
     cols: dict[str, list[float]] = {f: [] for f in FIELDS}
     for line in res.stdout.splitlines():
@@ -70,7 +76,7 @@ def tshark_fields(pcap) -> dict[str, np.ndarray]:
         n = len(vals[1])
         assert all(len(v) == n for v in vals[1:]), line[:200]
         cols[FIELDS[0]] += [_num(vals[0][0])] * n
-        for f, v in zip(FIELDS[1:], vals[1:]):
+        for f, v in zip(FIELDS[1:], vals[1:], strict=True):
             cols[f] += [_num(x) for x in v]
     return {f: np.array(v) for f, v in cols.items()}
 
@@ -136,7 +142,7 @@ def test_bad_sac_and_missing_columns_are_one_line():
     assert "\n" not in str(ei.value) and "north" in str(ei.value)
     with pytest.raises(ConfigError, match="sic"):
         Cat048Encoder(1, -1)
-    with pytest.raises(EncodeError, match="h_m .*--site"):
+    with pytest.raises(EncodeError, match=r"h_m .*--site"):
         Cat048Encoder().encode_batch({"tod_s": np.zeros(1), "rx_good": np.ones(1),
                                       "go": np.ones(1), "sr_c_m": np.ones(1),
                                       "az_c_deg": np.ones(1)})
@@ -174,10 +180,9 @@ def test_file_writer_appears_only_when_complete(tmp_path):
     batch = flight(2000, seed=5)
     cols = {c: batch[c] for c in batch.columns}
     out = tmp_path / "run.ast"
-    with pytest.raises(RuntimeError):
-        with AsterixFileWriter(str(out), metadata={"site": "demo"}) as w:
-            w.write(cols)
-            raise RuntimeError("interrupted")
+    with pytest.raises(RuntimeError), AsterixFileWriter(str(out), metadata={"site": "demo"}) as w:
+        w.write(cols)
+        raise RuntimeError("interrupted")
     assert list(tmp_path.iterdir()) == []          # aborted: no file, no leftover part
     w = AsterixFileWriter(str(out), site=types.SimpleNamespace(asterix_sac=3, asterix_sic=4))
     w.open()

@@ -105,7 +105,7 @@ def test_export_reads_back_with_pychapter10(sim_rec: Path) -> None:
     assert b["uart_messages"] == b["chunks"] > 500
     assert b["types"]["0x01"] == 1 and b["types"]["0x02"] >= 1
     # a time packet at every whole second of the span, one second apart
-    rtc, times = zip(*b["time_packets_rtc"])
+    rtc, times = zip(*b["time_packets_rtc"], strict=True)
     assert len(times) == b["span_seconds"] >= 12
     assert all((t1 - t0).total_seconds() == 1.0 for t0, t1 in pairwise(times))
     assert {r1 - r0 for r0, r1 in pairwise(rtc)} == {10_000_000}   # 1 s of the 10-MHz RTC
@@ -129,7 +129,7 @@ def test_gap_clock_step_big_chunk_and_event_log(crafted: tuple[Path, list[dict]]
     assert b["max_time_error_us"] <= 1.0
     # the gap is covered second by second (RTC); the step shows as one jump of the wall
     # clock against the RTC, at a time packet of its own
-    rtc, times = zip(*b["time_packets_rtc"])
+    rtc, times = zip(*b["time_packets_rtc"], strict=True)
     assert max(r1 - r0 for r0, r1 in pairwise(rtc)) <= 10_000_000
     jumps = [(t1 - t0).total_seconds() - (r1 - r0) / 1e7
              for (r0, t0), (r1, t1) in pairwise(b["time_packets_rtc"])]

@@ -19,14 +19,14 @@ from pathlib import Path
 
 import paho.mqtt.client as paho
 import pytest
-
 from conftest import ROOT
+
 from radar_io.benchmarks.service_load import end_process
 from radar_io.coordinates.transforms import load_site
 from radar_io.errors import ConfigError
 from radar_io.recording.recorder import Recorder
-from radar_io.service.pipeline import Pipeline as ServicePipeline
 from radar_io.service.history import History
+from radar_io.service.pipeline import Pipeline as ServicePipeline
 from radar_io.sinks import open_sink
 from radar_io.sinks.mqtt import MqttPublisher, parse_mqtt_url
 from radar_io.wirespec.frame import load_spec
@@ -62,10 +62,9 @@ class Broker:
                     self.port = s.getsockname()[1]
             conf = self.tmp / "mosquitto.conf"
             conf.write_text(f"listener {self.port} 127.0.0.1\n{self.extra}persistence false\n")
-            log = open(self.tmp / "mosquitto.log", "ab")
-            self.proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=log,
-                                         stderr=subprocess.STDOUT)
-            log.close()
+            with open(self.tmp / "mosquitto.log", "ab") as log:
+                self.proc = subprocess.Popen([MOSQUITTO, "-c", str(conf)], stdout=log,
+                                             stderr=subprocess.STDOUT)
             if wait_for(self._listening, 10):
                 return
             self.stop()
@@ -282,16 +281,22 @@ def test_broker_restart_resumes_and_counts_the_gap(broker, tmp_path):
 def test_registry_sink_publishes_rows(broker):
     import numpy as np
 
+    from radar_io.decoding.measurement import MeasurementBatch
+
     sub = Subscriber(broker.port, "reg")
     sink = open_sink("mqtt", f"mqtt://127.0.0.1:{broker.port}/reg?qos=0")
     try:
         assert wait_for(lambda: sink.stats()["connected"], 10)
         sink.write({"msg_seq": np.array([7, 8]), "sr_m": np.array([1000.0, np.nan])})
-        assert wait_for(lambda: len(sub.track) == 2, 10)
+        # a decoded batch (what decode_bytes returns) is columns too, though not a Mapping
+        assert sink.write(MeasurementBatch({"msg_seq": np.array([9]),
+                                            "sr_m": np.array([1200.0])})) == 1
+        assert wait_for(lambda: len(sub.track) == 3, 10)
     finally:
         sink.close()
         sub.close()
-    assert sub.track == [{"msg_seq": 7, "sr_m": 1000.0}, {"msg_seq": 8, "sr_m": None}]
+    assert sub.track == [{"msg_seq": 7, "sr_m": 1000.0}, {"msg_seq": 8, "sr_m": None},
+                         {"msg_seq": 9, "sr_m": 1200.0}]
 
 
 def test_mqtts_with_user_and_password_from_the_environment(tmp_path, monkeypatch, caplog):
@@ -340,6 +345,7 @@ def test_service_wiring_publishes_what_api_track_serves(broker, tmp_path):
 
     import numpy as np
     import uvicorn
+
     from radar_io.encoding.asterix_cat048 import RHO_LSB_M, THETA_LSB_DEG, decode_records
     from radar_io.service.app import build_app
     from radar_io.service.config import ServiceConfig
@@ -415,12 +421,13 @@ def test_ground_replay_outputs_say_the_data_is_not_live(broker, tmp_path):
 
     import uvicorn
     from conftest import require_program
+    from test_asterix import tshark_fields, write_pcap
+
     from radar_io.encoding.asterix_cat048 import decode_records
     from radar_io.recording.rdrlog import RecordingWriter
     from radar_io.service.app import build_app
     from radar_io.service.config import ServiceConfig
     from radar_io.simulation.radar import FlightScript, RadarSimulator, SimConfig
-    from test_asterix import tshark_fields, write_pcap
 
     require_program("tshark")
     data, _ = RadarSimulator(FlightScript(), SimConfig(seed=4, go_delay_s=0.0,

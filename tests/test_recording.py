@@ -9,16 +9,22 @@ import subprocess
 import sys
 import textwrap
 import time
+from itertools import pairwise
 
+import independent
 import numpy as np
 import pytest
 
-import independent
+from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.decoders import decode_bytes, iter_decode
 from radar_io.errors import RecordingError
-from radar_io.coordinates.transforms import load_site
-from radar_io.recording.rdrlog import (RecordingReader, RecordingWriter, encode_chunk, is_recording,
-                                iter_payloads)
+from radar_io.recording.rdrlog import (
+    RecordingReader,
+    RecordingWriter,
+    encode_chunk,
+    is_recording,
+    iter_payloads,
+)
 from radar_io.wirespec.frame import spec_dir
 
 
@@ -149,7 +155,7 @@ def test_chunks_from_an_offset_up_to_a_limit(tmp_path, spec):
 def test_not_a_recording(tmp_path):
     p = tmp_path / "x.rdrlog"
     p.write_bytes(b"hello world")
-    with pytest.raises(RecordingError, match="not an .rdrlog"):
+    with pytest.raises(RecordingError, match=r"not an \.rdrlog"):
         RecordingReader(p)
     with pytest.raises(RecordingError, match="not found"):
         RecordingReader(tmp_path / "missing.rdrlog")
@@ -245,7 +251,7 @@ def test_fsync_error_is_raised_not_swallowed(tmp_path, spec, monkeypatch):
     deadline = time.monotonic() + 10
     while w.fsync_error is None and time.monotonic() < deadline:
         time.sleep(0.01)
-    with pytest.raises(StorageError, match="fsync failed.*Input/output error"):
+    with pytest.raises(StorageError, match=r"fsync failed.*Input/output error"):
         w.write(b"after")
     with pytest.raises(StorageError, match="fsync failed"):
         w.close()
@@ -469,7 +475,7 @@ def test_version_2_keeps_both_clocks_and_version_1_still_reads(tmp_path, spec):
         chunks = list(r)
     assert [c.mono_ns for c in chunks] == [5 * 10**9 + i * 10**6 for i in range(5)]
     steps = [rdrlog.clock_step_s(a.t_ns, a.mono_ns, b.t_ns, b.mono_ns)
-             for a, b in zip(chunks, chunks[1:])]
+             for a, b in pairwise(chunks)]
     assert steps == [0.0, 0.0, -3600.0, 0.0]
 
     p1 = tmp_path / "v1.rdrlog"

@@ -6,10 +6,11 @@ from __future__ import annotations
 import time
 
 import independent
+
 from radar_io.recording.rdrlog import RecordingWriter
 from radar_io.recording.recorder import Recorder
-from radar_io.service.pipeline import Pipeline
 from radar_io.service.history import History
+from radar_io.service.pipeline import Pipeline
 
 N = 3000
 CHUNK = 777  # serial-read-sized chunks: frames (24 bytes) split across them
@@ -54,4 +55,4 @@ def test_backward_seek_adds_no_gap_and_no_edge(tmp_path, spec):
     assert st["bytes_discarded"] == 5 * CHUNK - 24 * first  # the cut frame before the jump
     # edges: frames 0 and 100 before the seek; after it 100, 200, … 2900 (frame 0 right
     # after the jump is not an edge: what came before it in the stream is unknown)
-    assert [e.seq for e in rec.sync_events] == [0, 100] + list(range(100, N, 100))
+    assert [e.seq for e in rec.sync_events] == [0, 100, *range(100, N, 100)]

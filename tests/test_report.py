@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import ROOT, require_program, run_cli
 
 ARTIFACTS = Path(os.environ.get("RADAR_IO_ARTIFACTS", ROOT / "artifacts"))
@@ -146,7 +145,7 @@ class _Chrome:
         self.events: list[dict] = []
         orig = self.c.ws.recv
 
-        def recv(timeout=None):  # noqa: ANN001
+        def recv(timeout=None):
             while True:
                 raw = orig(timeout=timeout)
                 msg = json.loads(raw)

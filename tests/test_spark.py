@@ -49,15 +49,15 @@ def spark_results(spark, archived):  # noqa: F811 (the imported fixture)
     assert code.count('"s3a://range/archive"') == 1
     ns: dict = {}
     src = code.replace('"s3a://range/archive"', repr(str(out)))
-    exec(compile(src, "analysis.md", "exec"), ns)  # noqa: S102 - the doc's own example
+    exec(compile(src, "analysis.md", "exec"), ns)  # the doc's own example
     return {name: [tuple(r) for r in ns[name].collect()] for name in ("runs", "bias", "crc")}
 
 
 def _same(spark_rows: list[tuple], duck_rows: list[tuple]) -> None:
     assert len(spark_rows) == len(duck_rows) > 0
-    for s, d in zip(spark_rows, duck_rows):
+    for s, d in zip(spark_rows, duck_rows, strict=True):
         assert len(s) == len(d)
-        for a, b in zip(s, d):
+        for a, b in zip(s, d, strict=True):
             if isinstance(b, float) or isinstance(a, float):
                 assert math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-9), (s, d)
             else:

@@ -240,7 +240,7 @@ class _Reducer:
         self.wraps += int(back.sum())
         steps = np.diff(tod_u, prepend=prev_u)[0 if self.n else 1:]
         vals, counts = np.unique(steps, return_counts=True)
-        for v, k in zip(vals.tolist(), counts.tolist()):
+        for v, k in zip(vals.tolist(), counts.tolist(), strict=True):
             self.steps[v] = self.steps.get(v, 0) + k
         self.prev_tod = float(tod[-1])
         t = tod_u - self.t0

@@ -24,7 +24,7 @@ import base64
 import html
 import io
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -74,6 +74,7 @@ def _path_radar_polyline(d: FlightDigest, step_m: float = 50.0) -> tuple[np.ndar
     if p.frame == "runway":
         from radar_io.coordinates.transforms import runway_to_radar
 
+        assert d.site is not None  # digest_recording refuses a runway-frame path without it
         x, y, h = runway_to_radar(x, y, h, d.site)
     return np.asarray(x), np.asarray(y), np.asarray(h)
 
@@ -311,7 +312,7 @@ def _png_b64(fig: Any) -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _table(head: tuple[str, ...] | None, rows: list[tuple[str, ...]]) -> str:
+def _table(head: tuple[str, ...] | None, rows: Sequence[tuple[str, ...]]) -> str:
     e = html.escape
     out = ["<table>"]
     if head:
@@ -352,12 +353,12 @@ def render_html(rep: Report) -> str:
 
 
 def _table_pages(pdf: Any, title: str, head: tuple[str, ...] | None,
-                 rows: list[tuple[str, ...]], per_page: int = 40) -> None:
+                 rows: Sequence[tuple[str, ...]], per_page: int = 40) -> None:
     plt = _plt()
     for k in range(0, max(len(rows), 1), per_page):
         chunk = rows[k:k + per_page] or [("(none)",) + ("",) * (len(head or ("",)) - 1)]
         fig = plt.figure(figsize=(8.27, 11.69))
-        fig.text(0.05, 0.96, title + (f" (continued)" if k else ""), fontsize=13,
+        fig.text(0.05, 0.96, title + (" (continued)" if k else ""), fontsize=13,
                  weight="bold")
         ax = fig.add_axes((0.03, 0.03, 0.94, 0.9))
         ax.axis("off")

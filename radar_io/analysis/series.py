@@ -387,10 +387,10 @@ class _Scanner:
             return {"kind": kind, **extra, "t_s": float(t_s[i]), "t_ns": int(t_ns[i]),
                     "seq": int(seq[i]), "tod_s": float(tod[i])}
 
-        found = [(int(i), 0, event(i, "go", edge="rise" if go[i] else "fall"))
-                 for i in np.flatnonzero(go != prev_go)]
-        found += [(int(i), 1, event(i, "sync"))
-                  for i in np.flatnonzero((sync != 0) & (prev_sync == 0))]
+        found = [(i, 0, event(i, "go", edge="rise" if go[i] else "fall"))
+                 for i in np.flatnonzero(go != prev_go).tolist()]
+        found += [(i, 1, event(i, "sync"))
+                  for i in np.flatnonzero((sync != 0) & (prev_sync == 0)).tolist()]
         return [e for _, _, e in sorted(found, key=lambda f: f[:2])]
 
 
@@ -463,7 +463,7 @@ class SeriesIndex:
                                   f"{', '.join(self._columns)}")
         if not names:
             raise ValidationError("columns: give at least one column")
-        if not 1 <= points:
+        if points < 1:
             raise ValidationError(f"points must be at least 1, got {points}")
         for what, v in (("start_s", start_s), ("end_s", end_s)):
             if v is not None and not math.isfinite(v):

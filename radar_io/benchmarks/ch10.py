@@ -69,7 +69,7 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
             fail(f"packet {i} at byte {off}: data checksum wrong")
         key = f"0x{p.data_type:02x}"
         types[key] = types.get(key, 0) + 1
-        if i == 0 and p.data_type != 0x01 or i == 1 and p.data_type != 0x11:
+        if (i == 0 and p.data_type != 0x01) or (i == 1 and p.data_type != 0x11):
             fail("the first packets are not TMATS then time")
         if p.data_type == 0x01:
             tmats = p.data.decode("ascii")
@@ -114,7 +114,7 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
         if code.startswith("R-1\\EV\\ID-"):
             names[int(code.rsplit("-", 1)[1])] = value
     counts: dict[str, int] = {}
-    for num, count, _, _ in events:
+    for num, _, _, _ in events:
         counts[names.get(num, str(num))] = counts.get(names.get(num, str(num)), 0) + 1
     return {"packets": sum(types.values()), "bytes": len(raw), "types": types,
             "chunks": len(chunks), "uart_messages": len(uart),

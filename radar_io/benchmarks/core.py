@@ -3,7 +3,8 @@
 Analysts decode a recording once, in a fresh process, so the headline figure is
 the **first** ``decode_bytes`` call in a **fresh child process** (import, table
 building, page faults of the output columns and all), reported beside the best
-of ``repeat`` warm calls, with the child's peak RSS (``VmHWM``; ``resource.getrusage`` where /proc is missing).
+of ``repeat`` warm calls, with the child's peak RSS (``VmHWM``; ``resource.getrusage``
+where /proc is missing).
 The anchors are measured in the same child, on the same bytes:
 
 * plain-Python reference: ``struct.unpack_from`` + ``binascii.crc_hqx`` per frame
@@ -87,7 +88,7 @@ def child(path: str, repeat: int, alloc: str | None = None) -> dict[str, Any]:
     ``alloc``: a ``batch_decoder.column_array`` mode for the output columns (default: the
     decoder's own)."""
     data = Path(path).read_bytes()
-    t0, c0, rss0 = _usage()
+    t0, _, rss0 = _usage()
     from radar_io.decoding import batch_decoder
     from radar_io.decoding.batch_decoder import decode_bytes
 
@@ -187,7 +188,7 @@ def run_bench(frames: int = 2_000_000, repeat: int = 5, per_frame_frames: int = 
         res.update(bench_service(serve_seconds))
     if include_plugins and importlib.util.find_spec("radar_io.vision") is not None:
         try:
-            from radar_io.benchmarks.runway import bench_runway  # type: ignore[import-not-found]
+            from radar_io.benchmarks.runway import bench_runway
 
             res.update(bench_runway())
         except ImportError:

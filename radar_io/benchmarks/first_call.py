@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import resource
 import sys
+from itertools import pairwise
 from pathlib import Path
 
 
@@ -49,7 +50,7 @@ def breakdown(path: str, block_frames: int = 1 << 16, alloc: str | None = None
         for acc, x, y in ((framing, a, b), (decoding, b, c)):
             acc[0] += y[0] - x[0]
             acc[1] += y[1] - x[1]
-    res = {name: (m[0] - p[0], m[1] - p[1]) for (_, p), (name, m) in zip(marks, marks[1:])}
+    res = {name: (m[0] - p[0], m[1] - p[1]) for (_, p), (name, m) in pairwise(marks)}
     res["framing"] = (framing[0], framing[1])
     res["decoding"] = (decoding[0], decoding[1])
     return res

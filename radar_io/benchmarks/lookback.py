@@ -152,7 +152,7 @@ def run(hours: float = 1.0, queries: int = 50, points: int = 1000, seed: int = 1
                                            for _, _, b in answers for c in COLUMNS)
         t, cols = reference_columns(rec, path_file)
         equal = 0
-        for start, end, b in answers:
+        for _, _, b in answers:
             ok = True
             for c in COLUMNS:
                 t_s, mn, mx, dec = expected(t, cols[c], b["start_s"], b["end_s"], points)

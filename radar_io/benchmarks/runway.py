@@ -36,7 +36,8 @@ def bench_runway(seconds: float = 3.0) -> dict[str, float]:
     ]
     frames = [render_runway(p, width, height, f, RunwayScene(seed=i)) for i, p in enumerate(poses)]
     sequence = [
-        render_runway(RunwayPose(2.0 + 0.2 * i, -3.0, 1.0, 60.0 - i, 2.0), width, height, f, RunwayScene(seed=i))
+        render_runway(RunwayPose(2.0 + 0.2 * i, -3.0, 1.0, 60.0 - i, 2.0), width, height, f,
+                      RunwayScene(seed=i))
         for i in range(8)
     ]
     budget = max(float(seconds), 0.2) / 2.0

@@ -36,7 +36,7 @@ def make_video(path: Path, frames: int, width: int = 640, height: int = 480) -> 
     f = focal_for_fov(width, 60.0)
     imgs = [render_runway(RunwayPose(5.0, -4.0, 3.0, 60.0 - k, 10.0), width, height, f)
             for k in range(20)]
-    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (width, height), False)
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), 25, (width, height), False)
     for i in range(frames):
         vw.write(imgs[i % 20])
     vw.release()
@@ -70,7 +70,7 @@ def run(frames: int, clients: int) -> dict[str, Any]:
                 while not stop.is_set():
                     try:
                         text = await asyncio.wait_for(ws.recv(), 1.0)
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         continue
                     doc = json.loads(text)
                     for m in doc if isinstance(doc, list) else [doc]:

@@ -116,7 +116,7 @@ class ServeProcess:
             time.sleep(0.1)
         raise TimeoutError("service did not become ready")
 
-    def __enter__(self) -> "ServeProcess":
+    def __enter__(self) -> ServeProcess:
         """Wait until it serves (stopping it when it never does)."""
         try:
             self.wait_ready()
@@ -385,13 +385,13 @@ def _fanout_worker(url: str, n: int, batch: bool, connected: Any, stop: Any) -> 
         m = num.match(msg, i + len(key))
         return int(m.group()) if m else -1
 
-    async def client(spans: "array[int]") -> None:
+    async def client(spans: array[int]) -> None:
         async with websockets.connect(url, max_size=None, open_timeout=120) as ws:
             connected.put(1)
             while not done.is_set():
                 try:
                     msg = await asyncio.wait_for(ws.recv(decode=False), 0.5)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     continue
                 first, last = seq_at(msg, msg.find(key)), seq_at(msg, msg.rfind(key))
                 if batch and msg.count(key) != last - first + 1:

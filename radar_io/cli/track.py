@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from typing import Any, cast
+from typing import Any
 
 from radar_io.cli.argtypes import positive_float
 from radar_io.cli.common import add_common, load_common
@@ -70,7 +70,6 @@ def run(args: argparse.Namespace) -> int:
     from radar_io.recording.rdrlog import ReadReport, iter_payloads
     from radar_io.sinks import open_table
     from radar_io.sinks.arrow_convert import output_metadata
-    from radar_io.sinks.table import TableWriter
     from radar_io.tracking.tracker import (
         TrackParams,
         TrackSummary,
@@ -113,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
     summary = TrackSummary()
     batches = iter_decode(iter_payloads(args.input, chunk_bytes=CHUNK_BYTES, report=report),
                           **common)
-    writer = cast(TableWriter, open_table(args.output, args.format, metadata=meta))
+    writer = open_table(args.output, args.format, metadata=meta)
     try:
         stats: dict[str, int] = {}
         for out in iter_track(batches, params, smooth=not args.forward_only,
@@ -121,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
                               estimate_bias=args.estimate_bias, airdata=airdata):
             if not writer.rows and not args.forward_only:  # smoothed: counts known already
                 writer.metadata.update(summary.metadata())
-            writer.write(cast(Any, out))  # a MeasurementBatch reads like the Batch mapping
+            writer.write(out)
             stats = out.stats
         writer.final_metadata.update(summary.metadata())
         writer.final_metadata.update({k: str(v) for k, v in stats.items()})

@@ -22,12 +22,12 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Final
 
 from radar_io.errors import ConfigError, StorageError
 from radar_io.textfiles import Fields, read_json, show
 
-FORMAT = "radar_io-calibration/1"
+FORMAT: Final = "radar_io-calibration/1"
 #: keys of a calibration set document
 TOP_KEYS = ("format", "id", "created_utc", "biases", "statistics", "provenance")
 #: bias → largest magnitude accepted (m, deg, deg): beyond that the set is a mistake, not a bias

@@ -24,11 +24,12 @@ Values are rounded to the nearest LSB; RHO and the height saturate at their rang
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
+from radar_io.decoding.measurement import Columns
 from radar_io.errors import ConfigError, EncodeError
 
 CATEGORY = 48
@@ -78,14 +79,14 @@ class Cat048Encoder:
         self.saturation = {"rho": 0, "height": 0}
 
     @classmethod
-    def for_site(cls, site: Any, **options: Any) -> "Cat048Encoder":
+    def for_site(cls, site: Any, **options: Any) -> Cat048Encoder:
         """SAC/SIC from the site (``Site.asterix_sac/asterix_sic``; 0 when absent)."""
         where = f"site {getattr(site, 'name', '?')} [asterix]"
         return cls(check_code("sac", getattr(site, "asterix_sac", 0) or 0, where),
                    check_code("sic", getattr(site, "asterix_sic", 0) or 0, where), **options)
 
     # -------------------------------------------------------------------- records
-    def valid(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    def valid(self, cols: Columns) -> np.ndarray:
         """Mask of the samples that become reports."""
         missing = [c for c in REQUIRED_COLUMNS if c not in cols]
         if missing:
@@ -98,7 +99,7 @@ class Cat048Encoder:
             ok &= np.isfinite(np.asarray(cols[c], dtype=np.float64))
         return ok
 
-    def records_array(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+    def records_array(self, cols: Columns) -> np.ndarray:
         """(n, 15) uint8: one CAT048 record per valid sample, in row order."""
         ok = self.valid(cols)
         n = int(ok.sum())
@@ -130,7 +131,7 @@ class Cat048Encoder:
         return out
 
     # -------------------------------------------------------------------- blocks
-    def encode_blocks(self, cols: Mapping[str, np.ndarray]) -> list[bytes]:
+    def encode_blocks(self, cols: Columns) -> list[bytes]:
         """Data blocks (CAT, LEN, records) of at most ``max_block_bytes`` each."""
         recs = self.records_array(cols)
         per = (self.max_block_bytes - 3) // RECORD_BYTES
@@ -141,7 +142,7 @@ class Cat048Encoder:
         self.blocks += len(blocks)
         return blocks
 
-    def encode_batch(self, cols: Mapping[str, np.ndarray]) -> bytes:
+    def encode_batch(self, cols: Columns) -> bytes:
         """Concatenated data blocks of one batch (the ``.ast`` file format)."""
         return b"".join(self.encode_blocks(cols))
 
@@ -182,7 +183,7 @@ def decode_records(data: bytes) -> dict[str, np.ndarray]:
             "az_deg": be(11, 2) * THETA_LSB_DEG, "h_m": h * HEIGHT_LSB_M}
 
 
-def write_asterix(batches: Iterable[Mapping[str, np.ndarray]], path: str, *,
+def write_asterix(batches: Iterable[Columns], path: str, *,
                   site: Any = None, encoder: Cat048Encoder | None = None) -> Cat048Encoder:
     """Write concatenated CAT048 data blocks of every batch to ``path`` (``OUT.ast``; the file
     appears only when complete); returns the encoder (``records``, ``blocks``, ``saturation``)."""

@@ -40,7 +40,9 @@ chunk in the middle is counted and skipped by hunting for the next valid chunk.
 
 from __future__ import annotations
 
+import errno as _errno
 import json
+import logging
 import os
 import struct
 import threading
@@ -52,13 +54,10 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from radar_io import __version__
-import errno as _errno
-import logging
-
-from radar_io.errors import RecordingError, StorageError
 from radar_io.coordinates.transforms import Site
-from radar_io.wirespec.frame import FrameSpec
+from radar_io.errors import RecordingError, StorageError
 from radar_io.textfiles import open_input
+from radar_io.wirespec.frame import FrameSpec
 
 FILE_MAGIC = b"RDRLOG\x00\x02"
 CHUNK_MAGIC = b"CHK2"
@@ -302,7 +301,7 @@ class RecordingWriter:
     def closed(self) -> bool:
         return self._fd < 0
 
-    def __enter__(self) -> "RecordingWriter":
+    def __enter__(self) -> RecordingWriter:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -376,7 +375,7 @@ class RecordingReader:
     def close(self) -> None:
         self._f.close()
 
-    def __enter__(self) -> "RecordingReader":
+    def __enter__(self) -> RecordingReader:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -385,7 +384,7 @@ class RecordingReader:
     def _unpack(self, head: bytes) -> tuple[bytes, int, int, int, int]:
         """magic, t_ns, mono_ns, length, crc of a chunk header of this file's version."""
         if self.version == 2:
-            return _CHUNK_HEAD.unpack(head)  # type: ignore[no-any-return]
+            return _CHUNK_HEAD.unpack(head)
         magic, t_ns, length, crc = _CHUNK_HEAD_V1.unpack(head)
         return magic, t_ns, t_ns, length, crc
 

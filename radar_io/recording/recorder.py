@@ -395,7 +395,7 @@ class Recorder:
                     self._abandon()
                     return
                 continue
-            except Exception:  # noqa: BLE001 - a bug: drop this job, keep the writer alive
+            except Exception:  # a bug: drop this job, keep the writer alive
                 log.exception("recording: %s job failed, dropped", ops[0].kind)
             self._done(ops)
         if self._w is not None:
@@ -496,7 +496,7 @@ class Recorder:
                 if self.on_closed is not None:
                     try:
                         self.on_closed(w.path)
-                    except Exception:  # noqa: BLE001 - closing must finish
+                    except Exception:  # closing must finish
                         log.exception("on_closed(%s) failed", w.path)
             if rec is not None:
                 rec.closed.set()

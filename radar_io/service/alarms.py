@@ -188,10 +188,10 @@ class AlarmEngine:
 
     def check_status(self, status: dict[str, Any], now_s: float | None = None,
                      mono_s: float | None = None) -> None:
-        """Built-in alarms from the service status dict (see :meth:`~radar_io.service.state.ServiceState.status`) and
-        ``disk_free_bytes``; ``now_s``: wall clock (a label), ``mono_s``: monotonic clock for
-        the CRC window and waits (default ``time.monotonic()``, or ``now_s`` when only that
-        is given)."""
+        """Built-in alarms from the service status dict (see
+        :meth:`~radar_io.service.state.ServiceState.status`) and ``disk_free_bytes``;
+        ``now_s``: wall clock (a label), ``mono_s``: monotonic clock for the CRC window and
+        waits (default ``time.monotonic()``, or ``now_s`` when only that is given)."""
         now = time.time() if now_s is None else now_s  # a label
         mono = mono_s if mono_s is not None else (time.monotonic() if now_s is None else now_s)
         with self._lock:
@@ -433,6 +433,6 @@ async def status_loop(svc: Any, engine: AlarmEngine, period_s: float = 0.25) -> 
             if current is not None and current != recording:
                 engine.snapshot()
             recording = current
-        except Exception:  # noqa: BLE001 - a failing check must not end the loop
+        except Exception:  # a failing check must not end the loop
             logging.getLogger("radar_io.alarms").exception("alarm status check failed")
         await asyncio.sleep(period_s)

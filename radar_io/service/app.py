@@ -55,14 +55,14 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     state = ServiceState(cfg)
-    state.alarms = attach_alarms(state)
+    state.alarms = alarm_engine = attach_alarms(state)
     lookback = LookBack(state)  # look-back indexes (routers/series.py)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         state.start(asyncio.get_running_loop())
         lookback.start()  # after the state: it chains onto the recorder's on_closed
-        alarm_task = asyncio.create_task(status_loop(state, state.alarms))
+        alarm_task = asyncio.create_task(status_loop(state, alarm_engine))
         try:
             yield
         finally:

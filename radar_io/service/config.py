@@ -41,13 +41,15 @@ class ServiceConfig:
     preroll_s: Annotated[float, Ge(0.0), Le(600.0)] = 2.0
     retry_s: Annotated[float, Gt(0.0), Le(3600.0)] = 5.0  #: automatic recording: retry after a disk error
     low_space_mb: Annotated[float, Ge(0.0)] = 1024.0      #: status storage.low_space below this free space
-    recording_buffer_mb: Annotated[float, Gt(0.0), Le(65536.0)] = 64.0  #: chunks held while the disk fails (MiB)
+    #: chunks held while the disk fails (MiB)
+    recording_buffer_mb: Annotated[float, Gt(0.0), Le(65536.0)] = 64.0
     runway_queue: Annotated[int, Ge(0), Le(100)] = 2      #: runway video jobs waiting (429 beyond)
     runway_job_timeout_s: Annotated[float, Gt(0.0), Le(86400.0)] = 1800.0  #: one video job (s)
     history_mb: Annotated[float, Gt(0.0), Le(4096.0)] = 64.0  #: encoded messages kept (MiB)
     ws_queue_size: Annotated[int, Ge(1), Le(1_000_000)] = 5000  #: per client; oldest skipped beyond
     ws_max_clients: Annotated[int, Ge(1), Le(100_000)] = 500    #: more are refused (close 1013)
-    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.0  #: 0: adaptive; > 0: minimum spacing of fan-out dispatches (s)
+    #: 0: adaptive fan-out; > 0: minimum spacing of fan-out dispatches (s)
+    ws_batch_interval_s: Annotated[float, Ge(0.0), Le(1.0)] = 0.0
     max_replays: Annotated[int, Ge(0), Le(64)] = 4  #: replay sessions at once (429 beyond)
     replay_idle_s: Annotated[float, Gt(0.0), Le(86400.0)] = 300.0  #: a session nobody watches ends
     allowed_origins: list[str] = field(default_factory=list)  #: besides the same host

@@ -17,8 +17,14 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from radar_io.errors import (ConflictError, NotFoundError, RadarIOError, StorageError,
-                             UnavailableError, ValidationError)
+from radar_io.errors import (
+    ConflictError,
+    NotFoundError,
+    RadarIOError,
+    StorageError,
+    UnavailableError,
+    ValidationError,
+)
 
 #: radar_io error class → (HTTP status, error type), first match wins
 STATUS_BY_CLASS: tuple[tuple[type[RadarIOError], int, str], ...] = (

@@ -181,7 +181,7 @@ class Pipeline:
             t_ns, mono_ns = self.clock.now()
             try:
                 self._process(data, t_ns, mono_ns)
-            except Exception:  # noqa: BLE001 - a bug downstream must not stop acquisition
+            except Exception:  # a bug downstream must not stop acquisition
                 self.processing_errors += 1
                 log.exception("processing a chunk failed")
         link.close()
@@ -232,7 +232,7 @@ class Pipeline:
         for proc in self.processors:
             try:
                 proc(msgs)
-            except Exception:  # noqa: BLE001 - one failing extra must not stop the others
+            except Exception:  # one failing extra must not stop the others
                 self.processing_errors += 1
                 log.exception("processor %r failed", proc)
         now = time.monotonic()

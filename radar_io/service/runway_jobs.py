@@ -335,7 +335,7 @@ class RunwayJobs:
                     state = "cancelled"
             except RadarIOError as exc:
                 state, error = "failed", str(exc)
-            except Exception as exc:  # noqa: BLE001 - a vision bug fails the job, not the worker
+            except Exception as exc:  # a vision bug fails the job, not the worker
                 log.exception("runway job %s failed", job.id)
                 state, error = "failed", f"{type(exc).__name__}: {exc}"
             with self._cond:

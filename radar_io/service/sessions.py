@@ -49,6 +49,8 @@ class ReplaySession:
         self.source, self.pipeline, self.hub = source, pipeline, hub
         self.history = pipeline.history
         self.touched_mono = time.monotonic()  #: last control call or last client seen
+        #: the closing of the clients, held until done (the loop keeps only weak references)
+        self._closing: set[asyncio.Future[None]] = set()
 
     @property
     def ws(self) -> str:
@@ -91,7 +93,9 @@ class ReplaySession:
     def _close_clients(self) -> None:
         """On the event loop: close every client (its handler then unregisters it)."""
         for c in list(self.hub.clients):
-            asyncio.ensure_future(_close_quietly(c.ws, f"replay session {self.id} ended"))
+            task = asyncio.ensure_future(_close_quietly(c.ws, f"replay session {self.id} ended"))
+            self._closing.add(task)
+            task.add_done_callback(self._closing.discard)
 
 
 async def _close_quietly(ws: Any, reason: str) -> None:
@@ -200,7 +204,7 @@ class ReplaySessions:
         while not self._stop.wait(period):
             try:
                 self.reap()
-            except Exception:  # noqa: BLE001 - the reaper must keep running
+            except Exception:  # the reaper must keep running
                 log.exception("reaping replay sessions")
 
     def close(self) -> None:

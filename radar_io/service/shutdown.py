@@ -33,7 +33,7 @@ def _run(steps: Sequence[Step]) -> None:
         t0 = time.monotonic()
         try:
             step()
-        except Exception:  # noqa: BLE001 - the other steps must still run
+        except Exception:  # the other steps must still run
             log.exception("stopping %s", name)
         else:
             log.info("stopped %s in %.2f s", name, time.monotonic() - t0)

@@ -23,19 +23,20 @@ from pathlib import Path
 from typing import Any
 
 from radar_io import __version__
+from radar_io.coordinates.transforms import load_site
 from radar_io.decoding.biases import load_calibration
 from radar_io.errors import ConfigError, NotFoundError, ValidationError
-from radar_io.coordinates.transforms import load_site
 from radar_io.recording.recorder import Recorder
+from radar_io.service.alarms import AlarmEngine
 from radar_io.service.calibrations import CalibrationStore
 from radar_io.service.clock import ClockSync
 from radar_io.service.config import ServiceConfig
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
+from radar_io.service.limits import KIND_KEYS, ExpensiveLimiter
 from radar_io.service.pipeline import Pipeline, Processor
 from radar_io.service.sessions import ReplaySessions
 from radar_io.sources import source_kind
-from radar_io.service.limits import KIND_KEYS, ExpensiveLimiter
 from radar_io.wirespec.frame import load_spec
 
 log = logging.getLogger("radar_io.service")
@@ -101,6 +102,8 @@ class ServiceState:
         self.sinks: dict[str, Any] = {}       # name → SinkWorker (started in start())
         self._sink_defs: dict[str, Any] = {}  # name → Sink, checked now, opened by its worker
         self.air: Any = None
+        #: limit alarms (``service.alarms.attach_alarms``, attached by the app)
+        self.alarms: AlarmEngine | None = None
         self._setup_outputs(cfg)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
         self._shutdown: Any = None  # service.shutdown.Shutdown once a stop has begun
@@ -236,6 +239,7 @@ class ServiceState:
         s = np.append(np.arange(0.0, self.path.length_m, step_m), self.path.length_m)
         x, y, h = self.path.position(s)
         if self.path.frame == "runway":
+            assert self.site is not None  # refused at start: a runway-frame path needs a site
             x, y, h = runway_to_radar(x, y, h, self.site)
         return {"frame": self.path.frame, "length_m": float(self.path.length_m),
                 "x_m": np.round(x, 2).tolist(), "y_m": np.round(y, 2).tolist(),

@@ -14,9 +14,8 @@ import os
 import sys
 from typing import IO, Any
 
-from radar_io.errors import StorageError
-
 from radar_io.encoding.asterix_cat048 import Cat048Encoder
+from radar_io.errors import StorageError
 from radar_io.sinks.atomic import AtomicFile
 from radar_io.sinks.base import Batch, EncoderSink, Sink
 
@@ -78,7 +77,7 @@ class AsterixFileWriter(Sink):
             self._out = sys.stdout.buffer
             return
         self._atomic = AtomicFile(self.target)  # the table writers' temporary-name file
-        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)
+        self._out = open(self._atomic.tmp_path, "wb", buffering=1 << 20)  # noqa: SIM115 - until close()
 
     def write(self, batch: Batch) -> int:
         if self._out is None:

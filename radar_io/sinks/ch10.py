@@ -218,7 +218,10 @@ def _event_time(rec: Mapping[str, Any]) -> tuple[int | None, int | None]:
     t = rec.get("t_ns")
     if t is None and isinstance(rec.get("t_s"), (int, float)):
         t = round(rec["t_s"] * 1e9)
-    ok = (lambda v: isinstance(v, int) and not isinstance(v, bool))
+
+    def ok(v: Any) -> bool:
+        return isinstance(v, int) and not isinstance(v, bool)
+
     return (mono if ok(mono) else None), (t if ok(t) else None)
 
 
@@ -376,7 +379,7 @@ class Ch10Writer(Sink):
     def write(self, batch: Batch) -> int:
         """Write a batch of received chunks (``t_ns``, ``mono_ns``, ``data`` columns)."""
         before = self.counts.bytes
-        for t, m, d in zip(batch["t_ns"], batch["mono_ns"], batch["data"]):
+        for t, m, d in zip(batch["t_ns"], batch["mono_ns"], batch["data"], strict=True):
             self.write_chunk(int(t), int(m), bytes(d))
         return self.counts.bytes - before
 

@@ -366,11 +366,12 @@ class MqttSink(Sink):
 
     def write(self, batch: Batch) -> int:
         names = list(batch.keys())
-        n = len(next(iter(batch.values()), ()))
+        cols = [np.asarray(batch[c]) for c in names]
+        n = len(cols[0]) if cols else 0
         if n == 0:
             return 0
-        cols = [np.asarray(batch[c]) for c in names]
-        rows = [dict(zip(names, vals)) for vals in zip(*(c.tolist() for c in cols))]
+        rows = [dict(zip(names, vals, strict=True))
+                for vals in zip(*(c.tolist() for c in cols), strict=True)]
         items = []
         for r in rows:
             self._count += 1

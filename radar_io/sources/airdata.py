@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-
 log = logging.getLogger("radar_io.airdata")
 
 KT = 1852.0 / 3600.0   # m/s per knot

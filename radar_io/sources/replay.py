@@ -10,14 +10,14 @@ that drives the outputs) and the service's replay sessions (``service/sessions.p
 from __future__ import annotations
 
 import threading
-import urllib.parse
 import time
+import urllib.parse
 from pathlib import Path
 from typing import Any
 
 from radar_io.errors import SourceError
-from radar_io.sources.base import parse_query
 from radar_io.recording.rdrlog import RecordingReader
+from radar_io.sources.base import parse_query
 
 
 class ReplaySource:
@@ -84,7 +84,7 @@ class ReplaySource:
 
     def open(self) -> None:
         try:
-            self._f = open(self.path, "rb")
+            self._f = open(self.path, "rb")  # noqa: SIM115 - held until close()
         except OSError as exc:
             raise SourceError(f"cannot open recording {self.path.name}: {exc.strerror}") from exc
         self._anchor = None

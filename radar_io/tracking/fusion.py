@@ -49,13 +49,13 @@ def read_fixes(path: str | os.PathLike[str]) -> Fixes:
     t = read_table(path, min_rows=1)
     t.require(*FIX_COLUMNS)
     idx = t.floats("sync_index")
-    for v, line in zip(idx, t.lines):
+    for v, line in zip(idx, t.lines, strict=True):
         if v < 0 or v != int(v):
             raise CalibrationInputError(f"{t.path}, line {line}, column sync_index: expected a "
                                         f"0-based integer, got {v!r}")
     sig = np.column_stack([t.floats(c) for c in ("sigma_x_m", "sigma_y_m", "sigma_z_m")])
-    for row, line in zip(sig, t.lines):
-        for c, v in zip(("sigma_x_m", "sigma_y_m", "sigma_z_m"), row):
+    for row, line in zip(sig, t.lines, strict=True):
+        for c, v in zip(("sigma_x_m", "sigma_y_m", "sigma_z_m"), row, strict=True):
             if not v > 0:
                 raise CalibrationInputError(f"{t.path}, line {line}, column {c}: expected a "
                                             f"positive σ, got {v!r}")
@@ -114,7 +114,7 @@ class BiasEstimate:
         out: dict[str, Any] = {
             k: {"estimate": v + b0, "sigma": s} for k, v, b0, s in zip(
                 ("dsr_m", "del_deg", "daz_deg"), (self.dsr_m, self.del_deg, self.daz_deg),
-                b, self.sigma)}
+                b, self.sigma, strict=True)}
         out.update({"method": METHOD, "fixes": self.fixes_used, "chi2": self.chi2,
                     "chi2_dof": 3 * (self.fixes_used - 1),
                     "relative_to_calibration": base.id if base is not None else "none",
@@ -155,7 +155,7 @@ def estimate_bias(fixes: Fixes, state: np.ndarray, cov: np.ndarray) -> BiasEstim
         weights.append(W)
     cov_b = np.linalg.inv(info)
     b = cov_b @ rhs
-    chi2 = float(sum((d - b) @ W @ (d - b) for d, W in zip(diffs, weights)))
+    chi2 = float(sum((d - b) @ W @ (d - b) for d, W in zip(diffs, weights, strict=True)))
     scale = np.array([1.0, math.degrees(1.0), math.degrees(1.0)])
     residuals = [{"dsr_m": float(r[0]), "del_deg": math.degrees(r[1]),
                   "daz_deg": math.degrees(r[2])} for r in (d - b for d in diffs)]

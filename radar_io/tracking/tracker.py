@@ -143,7 +143,7 @@ class TrackSummary:
         if self.bias is not None:
             b = self.bias
             for k, v, sd in zip(("dsr_m", "del_deg", "daz_deg"), (b.dsr_m, b.del_deg, b.daz_deg),
-                                b.sigma):
+                                b.sigma, strict=True):
                 meta[f"tracking.bias_{k}"] = f"{v:.6g} ± {sd:.3g}"
         pa = self.pressure_altitude
         if pa is not None:
@@ -197,9 +197,9 @@ def _output(seq: np.ndarray, tod: np.ndarray, state: np.ndarray, cov: np.ndarray
         from radar_io.coordinates.transforms import geodetic, radar_sea, runway_xyh
 
         sr, el, az = radar_sea(state[:, 0], state[:, 1], state[:, 2])
-        for c, v in zip(("xr_m", "yr_m", "hr_m"), runway_xyh(sr, el, az, site)):
+        for c, v in zip(("xr_m", "yr_m", "hr_m"), runway_xyh(sr, el, az, site), strict=True):
             cols[c] = np.asarray(v)
-        for c, v in zip(("lat_deg", "lon_deg", "hae_m"), geodetic(sr, el, az, site)):
+        for c, v in zip(("lat_deg", "lon_deg", "hae_m"), geodetic(sr, el, az, site), strict=True):
             cols[c] = np.asarray(v)
         order += ["xr_m", "yr_m", "hr_m", "lat_deg", "lon_deg", "hae_m"]
     batch = MeasurementBatch(cols, stats, order)
@@ -384,7 +384,7 @@ def smooth_arrays(cols: dict[str, np.ndarray], fwd: _Forward, summary: TrackSumm
     fx, fP = np.empty((B, 6)), np.empty((B, 6, 6))
     xs, Ps = np.zeros(6), np.zeros((6, 6))
     has_next = False
-    for lo, cp in zip(reversed(starts), reversed(checkpoints)):  # pass 2: refilter, smooth
+    for lo, cp in zip(reversed(starts), reversed(checkpoints), strict=True):  # pass 2: refilter, smooth
         hi = min(lo + B, n)
         fwd.restore(cp)
         fwd.run(m, lo, hi, nis, flags, fx[:hi - lo], fP[:hi - lo])

@@ -2,9 +2,10 @@
 (:func:`shim`) when ``RADAR_FAULTFS_FLAGS`` and ``RADAR_FAULTFS_DIR`` are set.
 
 Real files, real service; only the OS calls on files under ``RADAR_FAULTFS_DIR`` (the
-recordings directory) are patched, through flag files in ``RADAR_FAULTFS_FLAGS``. While ``FLAGDIR/full`` exists, ``os.write`` to such a file writes half
-of what it was given and raises ENOSPC, as a filling disk does (new files can still be
-created: a full disk usually has inodes left); while ``FLAGDIR/fsync`` exists, ``os.fsync`` raises EIO. Used by
+recordings directory) are patched, through flag files in ``RADAR_FAULTFS_FLAGS``. While
+``FLAGDIR/full`` exists, ``os.write`` to such a file writes half of what it was given and
+raises ENOSPC, as a filling disk does (new files can still be created: a full disk usually
+has inodes left); while ``FLAGDIR/fsync`` exists, ``os.fsync`` raises EIO. Used by
 test_storage_faults.py (no tiny tmpfs can be mounted in the test environment).
 """
 

@@ -137,5 +137,6 @@ def ink_js(canvas_expr: str) -> str:
     """JS: how many pixels of a canvas are drawn (not fully transparent and not background)."""
     return f"""(() => {{ const c = {canvas_expr}; if (!c) return 0;
         const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
-        let n = 0; for (let i = 0; i < d.length; i += 4) if (d[i + 3] > 0 && (d[i] + d[i + 1] + d[i + 2]) > 90) n++;
+        let n = 0;
+        for (let i = 0; i < d.length; i += 4) if (d[i + 3] > 0 && (d[i] + d[i + 1] + d[i + 2]) > 90) n++;
         return n; }})()"""

@@ -13,8 +13,7 @@ import urllib.request
 import pytest
 
 from radar_io.errors import ConfigError, NotFoundError
-from radar_io.service.alarms import (AlarmEngine, LimitRule, alarm_message, parse_alarm_config,
-                                     read_events)
+from radar_io.service.alarms import AlarmEngine, LimitRule, alarm_message, parse_alarm_config, read_events
 
 T0 = 1_800_000_000.0
 
@@ -249,7 +248,7 @@ def test_alarm_changes_are_pushed_on_the_websocket(svc):
 
 
 def test_report_endpoint_html_and_pdf(svc):
-    recs = _wait(lambda: [r for r in json.loads(_call(svc, "GET", "/api/recordings")[2])])
+    recs = _wait(lambda: list(json.loads(_call(svc, "GET", "/api/recordings")[2])))
     rid = recs[0]["id"]
     time.sleep(1.0)
     code, ctype, body = _call(svc, "GET", f"/api/recordings/{rid}/report")

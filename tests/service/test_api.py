@@ -11,12 +11,13 @@ import sys
 import time
 import urllib.error
 import urllib.request
+from itertools import pairwise
 
 import pytest
 import websockets
 
-from radar_io.recording.rdrlog import RecordingReader
 from radar_io.benchmarks.service_load import ServeProcess
+from radar_io.recording.rdrlog import RecordingReader
 
 from .test_live_pty import wait_for
 
@@ -157,7 +158,7 @@ def test_recordings_list_download_404_and_traversal(svc):
     events = svc.get(f"/api/sync-events?recording={rec}", 60)  # the first starts a worker
     assert events and all(e["recording"] == rec for e in events)
     assert all(b["tod_s"] - a["tod_s"] == pytest.approx(1.0, abs=0.002)
-               for a, b in zip(events, events[1:]))
+               for a, b in pairwise(events))
 
 
 def test_manual_recording_and_replay_controls(svc):
@@ -275,7 +276,7 @@ def test_bias_from_photo_observations_at_recorded_sync_events(svc):
     s = b["sync"].astype(int)
     edges = list(np.flatnonzero((s[1:] == 1) & (s[:-1] == 0)) + 1)
     if s[0] == 1:  # began before the recording: counted, never paired
-        edges = [0] + edges
+        edges = [0, *edges]
     usable = [(k, i) for k, i in enumerate(edges) if b["rx_good"][i] and i > 0][:3]
     assert len(usable) >= 2
     listed = svc.get(f"/api/sync-events?recording={rec}", 60)

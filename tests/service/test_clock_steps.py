@@ -100,7 +100,7 @@ def test_wall_clock_steps_of_an_hour_change_no_duration(tmp_path):
     figures = [(f"{len(frames) - len(bad)} good frames sent (and {len(bad)} with a bad CRC), "
                 f"{st['frames']} decoded; both recordings hold every good frame of their span")]
     # 0 frames lost; each recording: 2.0 ± 0.1 s of pre-roll before its GO edge
-    for p, (go_s, end_s) in zip(recs, GO_PERIODS):
+    for p, (go_s, end_s) in zip(recs, GO_PERIODS, strict=True):
         got = frames_with_chunks(p)
         seqs = [s for s, _, _ in got]
         first, last = seqs[0], seqs[-1]

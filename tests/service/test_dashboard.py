@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 import time
-
 from contextlib import ExitStack
 
 from radar_io.benchmarks.service_load import Pty

@@ -92,7 +92,7 @@ def test_lookback_zoom_cursor_url_replay_and_live(lookback_server, browser, tmp_
     whole = check_answer(chrome, srv)
     assert whole["decimated"] and whole["start_s"] == 0 and 119 < whole["end_s"] < 121
     sr = whole["columns"]["sr_m"]
-    assert any(lo is not None and lo < hi for lo, hi in zip(sr["min"], sr["max"]))
+    assert any(lo is not None and lo < hi for lo, hi in zip(sr["min"], sr["max"], strict=True))
     events = srv.get(f"/api/recordings/{REC}/events")["events"]
     assert {(e["kind"], e.get("edge")) for e in events} >= {("go", "rise"), ("sync", None)}
     assert chrome.eval("radarLookback.events.length") == len([e for e in events if e["t_s"] is not None])

@@ -9,10 +9,10 @@ from .test_live_pty import ARTIFACTS
 CHART_CANVAS = "radarStrip.charts[{col!r}] && radarStrip.charts[{col!r}].ctx.canvas"
 
 
-def choose(browser, column: str) -> None:
-    browser.wait_for(f"radarStrip.available.includes({column!r})", 10)
-    browser.eval(f"document.getElementById('strip-col').value = {column!r}, "
-                 "document.getElementById('strip-add').click(), true")
+def choose(page, column: str) -> None:
+    page.wait_for(f"radarStrip.available.includes({column!r})", 10)
+    page.eval(f"document.getElementById('strip-col').value = {column!r}, "
+              "document.getElementById('strip-add').click(), true")
 
 
 def test_strip_chart_shows_the_chosen_columns_and_remembers_them(sim_server, browser):  # noqa: F811

@@ -12,9 +12,9 @@ import pytest
 
 from radar_io.calibration.pairing import estimate_bias
 from radar_io.errors import ValidationError
-from radar_io.service.pipeline import encode_message
 from radar_io.service.history import History
 from radar_io.service.hub import Hub
+from radar_io.service.pipeline import encode_message
 
 
 def msgs(n: int, pad: int = 100) -> list[dict]:
@@ -69,9 +69,9 @@ def test_one_text_per_message_and_per_block_shared_by_every_client():
 
     singles, batches, published = asyncio.run(main())
     for ws in singles:  # the very text objects the history encoded, no copy per client
-        assert len(ws.sent) == 50 and all(a is b for a, (_, b) in zip(ws.sent, published))
+        assert len(ws.sent) == 50 and all(a is b for a, (_, b) in zip(ws.sent, published, strict=True))
     for ws in batches:  # one array per block, the same object for every batch client
-        assert len(ws.sent) == 5 and all(a is b for a, b in zip(ws.sent, batches[0].sent))
+        assert len(ws.sent) == 5 and all(a is b for a, b in zip(ws.sent, batches[0].sent, strict=True))
         assert [m["msg_seq"] for arr in ws.sent for m in json.loads(arr)] == list(range(1, 51))
 
 

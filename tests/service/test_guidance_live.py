@@ -17,8 +17,8 @@ import uuid
 import numpy as np
 import pytest
 import uvicorn
-
 from conftest import fly_on_virtual_bus
+
 from radar_io.service.app import create_app
 from radar_io.service.config import ServiceConfig
 from radar_io.wirespec.frame import spec_dir
@@ -65,7 +65,7 @@ def live(tmp_path):
 
 
 def test_deviation_uplink_and_air_data_live(live):
-    base, get, tmp = live
+    _, get, tmp = live
     st = wait_for(lambda: (s := get("/api/status"))["uplink"]["tlm"]["records"] > 50
                   and s["airdata"]["samples_received"] > 10 and s, what="uplink and air data")
     assert st["path"].endswith("demo_track_radar.toml")

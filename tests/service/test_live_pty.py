@@ -61,7 +61,7 @@ def test_1000_frames_per_s_reach_19_readers_intact_with_one_client_stalled(tmp_p
     expected = [independent.decode(fr) for fr in res.frames]
     for client in res.received:  # every other client: all messages, in order, every value right
         assert [m["msg_seq"] for _, _, m in client] == list(range(last + 1, last + 1 + n))
-        for (_, _, m), want in zip(client, expected):
+        for (_, _, m), want in zip(client, expected, strict=True):
             for col in DECODE_COLUMNS:
                 if want[col] is None:
                     assert m[col] is None, col

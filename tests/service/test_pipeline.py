@@ -8,10 +8,11 @@ import os
 import time
 
 import independent
+
 from radar_io.recording.rdrlog import RecordingReader, RecordingWriter
-from radar_io.service.pipeline import Pipeline, RecordedClock
-from radar_io.service.history import History
 from radar_io.recording.recorder import Recorder
+from radar_io.service.history import History
+from radar_io.service.pipeline import Pipeline, RecordedClock
 from radar_io.sources.replay import ReplaySource
 
 from .test_live_pty import wait_for

@@ -11,6 +11,7 @@ import threading
 import time
 import urllib.error
 import urllib.request
+from itertools import pairwise
 
 import cv2
 import numpy as np
@@ -104,7 +105,7 @@ def picked_points() -> dict[str, list[list[float]]]:
 
 def test_upload_an_image(svc):
     img = render_runway(POSE, W, H, F)
-    ok, png = cv2.imencode(".png", img)
+    _, png = cv2.imencode(".png", img)
     code, doc = post(svc, f"/api/runway?focal_px={F}&half_width_m=22.5", png.tobytes(), "image/png")
     assert code == 200, doc
     close_to_truth(doc)
@@ -172,8 +173,8 @@ def read_response(s: socket.socket) -> tuple[int, dict]:
         assert piece, buf
         buf += piece
     head, _, body = buf.partition(b"\r\n\r\n")
-    length = int([ln.split(b":")[1] for ln in head.split(b"\r\n")
-                  if ln.lower().startswith(b"content-length")][0])
+    length = int(next(ln.split(b":")[1] for ln in head.split(b"\r\n")
+                      if ln.lower().startswith(b"content-length")))
     while len(body) < length:
         body += s.recv(65536)
     return int(head.split()[1]), json.loads(body)
@@ -268,7 +269,7 @@ def test_service_keeps_answering_during_a_long_job(svc, long_video):
             while not stop.is_set():
                 try:
                     await asyncio.wait_for(ws.recv(), 1.0)
-                except asyncio.TimeoutError:
+                except TimeoutError:
                     continue
                 ws_times.append(time.monotonic())
 
@@ -296,7 +297,7 @@ def test_service_keeps_answering_during_a_long_job(svc, long_video):
     assert len(during_status) >= 10 and len(during_ws) >= 1000  # the sim runs at 1 kHz
 
     def max_gap(ts: list[float]) -> float:
-        return max(b - a for a, b in zip(ts, ts[1:])) * 1e3
+        return max(b - a for a, b in pairwise(ts)) * 1e3
 
     base_s = [t for t in status_times if t <= b1]
     base_w = [t for t in ws_times if t <= b1]

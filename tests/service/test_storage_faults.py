@@ -10,20 +10,18 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 import urllib.error
 import urllib.request
+from itertools import pairwise
 from pathlib import Path
 
-import pytest
-
 import independent
+
 from radar_io.benchmarks.service_load import Pty, ServeProcess
-from radar_io.recording.rdrlog import RecordingReader
 from radar_io.framing.framers import Framer
+from radar_io.recording.rdrlog import RecordingReader
 
 from . import faultfs
 from .test_live_pty import wait_for
@@ -87,7 +85,7 @@ def frames_of(path: Path) -> tuple[list[int], int]:
 
 
 def contiguous(seqs: list[int]) -> bool:
-    return all((b - a) & 0xFFFF == 1 for a, b in zip(seqs, seqs[1:]))
+    return all((b - a) & 0xFFFF == 1 for a, b in pairwise(seqs))
 
 
 def track_seqs(svc: ServeProcess) -> list[int]:
@@ -148,7 +146,7 @@ def test_go_edge_on_a_full_disk_loses_no_live_frame_and_retries(tmp_path):
         st = wait_for(lambda: (s := svc.get("/api/status"))["recording_error"] is None
                       and s["storage"]["buffer"]["pending_bytes"] == 0 and s, what="retry")
         rec = svc.recdir / f"{st['recording']}.rdrlog"
-        seqs, torn = frames_of(rec)
+        seqs, _ = frames_of(rec)  # still recording: its tail may be mid-write
         assert contiguous(seqs) and seqs[0] < go_seq and len(seqs) > 2000  # pre-roll on
         assert st["storage"]["buffer"]["overflow_chunks"] == 0
     finally:
@@ -174,7 +172,7 @@ def test_disk_fills_mid_recording(tmp_path):
                 while not stop.is_set():
                     try:
                         doc = json.loads(await asyncio.wait_for(ws.recv(), 0.2))
-                    except asyncio.TimeoutError:
+                    except TimeoutError:
                         continue
                     got.extend(m["seq"] for m in (doc if isinstance(doc, list) else [doc])
                                if "seq" in m)
@@ -295,9 +293,11 @@ def test_kill_9_while_recording_loses_no_frame(tmp_path):
             for k in range(0, len(data), 2400):  # 100 frames per write, 1 kHz pace
                 pty.write(data[k:k + 2400])
                 time.sleep(0.1)
-            wait_for(lambda: svc.get("/api/status")["frames"] == n, what="all frames decoded")
+            # wait_for polls the lambdas here, in this iteration: svc and n are this run's
+            wait_for(lambda: svc.get("/api/status")["frames"] == n,  # noqa: B023
+                     what="all frames decoded")
             # handed to the kernel by the writer thread (the reader only queues them)
-            wait_for(lambda: svc.get("/api/status")["storage"]["buffer"]["pending_bytes"] == 0,
+            wait_for(lambda: svc.get("/api/status")["storage"]["buffer"]["pending_bytes"] == 0,  # noqa: B023
                      what="all chunks written")
             assert svc.get("/api/status")["recording"]
             os.kill(svc.proc.pid, signal.SIGKILL)

@@ -23,7 +23,7 @@ SIGMA_ANGLE_DEG = 0.2 * 360.0 / 6400.0
 
 def _ramp(t: np.ndarray, knots: list[tuple[float, float]]) -> np.ndarray:
     """Piecewise-linear profile through (time, value) knots."""
-    ts, vs = zip(*knots)
+    ts, vs = zip(*knots, strict=True)
     return np.interp(t, ts, vs)
 
 

@@ -98,4 +98,4 @@ def test_agrees_with_stonesoup_ekf_and_rts(capsys):
         print(f"\nStone Soup: largest position difference {worst_pos:.2e} σ, σ ratio "
               f"{r.min():.4f} … {r.max():.4f}")
     assert worst_pos <= 0.1
-    assert 0.8 <= r.min() and r.max() <= 1.25
+    assert r.min() >= 0.8 and r.max() <= 1.25

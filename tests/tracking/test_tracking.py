@@ -164,9 +164,9 @@ def test_bias_estimated_from_photo_fixes(capsys):
     with capsys.disabled():
         print("\nbias: " + ", ".join(f"{n} {g:+.4f} ± {s:.4f} (truth {t:+.3f}, {(g - t) / s:+.2f}σ)"
                                      for n, g, s, t in zip(("ΔSR m", "ΔEL°", "ΔAZ°"), got,
-                                                           b.sigma, injected))
+                                                           b.sigma, injected, strict=True))
               + f"; χ² {b.chi2:.1f} on {3 * (b.fixes_used - 1)} dof")
-    for g, s, t in zip(got, b.sigma, injected):
+    for g, s, t in zip(got, b.sigma, injected, strict=True):
         assert abs(g - t) <= 3 * s and s > 0
     assert b.fixes_used == 18 and summary.fixes_used == 18
     # the track is the bias-corrected one: off by what the estimate's σ allows (0.5 m in

@@ -17,7 +17,7 @@ router = APIRouter(tags=["alarms"])
 
 
 def _engine(state: ServiceState) -> AlarmEngine:
-    engine = getattr(state, "alarms", None)
+    engine = state.alarms
     if engine is None:
         raise NotFoundError("no alarm engine in this service")
     return engine

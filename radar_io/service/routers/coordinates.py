@@ -27,7 +27,7 @@ class RunwayPoints(BaseModel):
     hr_m: Column = Field(description="up from the runway origin, m")
 
     @model_validator(mode="after")
-    def _same_length(self) -> "RunwayPoints":
+    def _same_length(self) -> RunwayPoints:
         n = {len(self.xr_m), len(self.yr_m), len(self.hr_m)}
         if len(n) != 1:
             raise ValueError(f"xr_m, yr_m and hr_m must have the same length, got "

@@ -41,6 +41,10 @@ class StepRequest(BaseModel):
     n: int = Field(1, ge=1, le=100000, description="recorded chunks to deliver")
 
 
+#: the body of a step request without one
+ONE_STEP = StepRequest(n=1)
+
+
 class SpeedRequest(BaseModel):
     speed: float = Field(ge=0.0, le=1000.0, description="× recorded pace; 0 = as fast as possible")
 
@@ -115,7 +119,7 @@ def replay_seek(req: SeekRequest, sid: str = SESSION_ID,
 
 @router.post("/api/replays/{sid}/step", tags=["control"], dependencies=CONTROL,
              responses=_CONTROL_ERRORS)
-def replay_step(req: StepRequest = Body(StepRequest(n=1)), sid: str = SESSION_ID,
+def replay_step(req: StepRequest = Body(ONE_STEP), sid: str = SESSION_ID,
                 state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Pause and deliver the next ``n`` recorded chunks."""
     s = _session(state, sid)

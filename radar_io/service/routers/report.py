@@ -19,7 +19,7 @@ router = APIRouter(tags=["recordings"])
             responses={200: {"content": {"text/html": {}, "application/pdf": {}}},
                        **responses(404, 422, 429, 503)})
 async def report(rec_id: str = Path(pattern=ID_PATTERN, description="recording id"),
-                 format: Literal["html", "pdf"] = Query("html"),  # noqa: A002
+                 format: Literal["html", "pdf"] = Query("html"),
                  state: ServiceState = Depends(get_state)) -> Response:
     """Self-contained HTML (figures embedded) or a PDF, built on request (a few seconds for
     a 10-minute recording) in a worker process. At most ``max_reports`` at once (429 with

@@ -106,7 +106,7 @@ def _overlay_png(image: Any, res: Any) -> str:
         if abs(a) > abs(b):
             pts = [(-c / a, 0), (-(c + b * (h - 1)) / a, h - 1)]
         (x0, y0), (x1, y1) = pts
-        cv2.line(img, (int(round(x0)), int(round(y0))), (int(round(x1)), int(round(y1))), color, 2,
+        cv2.line(img, (round(x0), round(y0)), (round(x1), round(y1)), color, 2,
                  cv2.LINE_AA)
 
     draw(res.horizon_px, (80, 220, 80))
@@ -114,7 +114,7 @@ def _overlay_png(image: Any, res: Any) -> str:
     draw(res.right_edge_px, (230, 120, 40))
     if res.vanishing_point_px is not None:
         u, v = res.vanishing_point_px
-        cv2.circle(img, (int(round(u)), int(round(v))), 6, (0, 255, 255), 2)
+        cv2.circle(img, (round(u), round(v)), 6, (0, 255, 255), 2)
     ok, png = cv2.imencode(".png", np.ascontiguousarray(img))
     return base64.b64encode(png.tobytes()).decode() if ok else ""
 

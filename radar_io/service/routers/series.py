@@ -56,7 +56,7 @@ class EventsAnswer(BaseModel):
 
 async def get_lookback(conn: HTTPConnection) -> LookBack:
     """The look-back indexes of the app serving this request."""
-    return conn.app.state.lookback  # type: ignore[no-any-return]
+    return conn.app.state.lookback
 
 
 async def _limited(conn: HTTPConnection, fn: Callable[..., dict[str, Any]],
