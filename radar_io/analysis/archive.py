@@ -41,7 +41,7 @@ PART_NAME = "part-0.parquet"
 #: the recording's events beside its frames (JSON lines, one fixed set of columns)
 EVENTS_NAME = "events.jsonl"
 #: the columns of the events table (absent fields are null)
-EVENT_COLUMNS = ("kind", "t_ns", "mono_ns", "annotation_kind", "label", "text", "id", "actor",
+EVENT_COLUMNS = ("kind", "t_ns", "t_s", "mono_ns", "annotation_kind", "label", "text", "id", "actor",
                  "edge", "seq", "tod_s", "name", "step_s")
 #: extensions collected when a directory is given
 RECORDING_SUFFIXES = (".rdrlog",)
@@ -168,15 +168,20 @@ def archive_recording(path: str | os.PathLike[str], out_dir: str | os.PathLike[s
 def write_events(src: Path, out: Path) -> int:
     """The recording's ``<id>.events.jsonl`` (go, sync, clock_step, alarm, annotation) as
     the partition's events table: every line with the :data:`EVENT_COLUMNS` (null when
-    absent; ``name`` is an alarm's); none when the recording has no events file. Written
-    to a temporary file and renamed; returns the rows."""
+    absent; ``name`` is an alarm's; ``t_s``: seconds from the recording's first chunk,
+    the report's time axis); none when the recording has no events file. Written to a
+    temporary file and renamed; returns the rows."""
+    from radar_io.recording.rdrlog import RecordingReader
     from radar_io.sinks.ch10 import read_events_file
 
     side = src.with_suffix(".events.jsonl")
     if not side.is_file():
         return 0
+    with RecordingReader(src) as r:
+        t0 = next((c.t_ns for c in r), None)
     rows = [{**{c: e.get(c) for c in EVENT_COLUMNS},
-             "kind": e.get("kind") or e.get("type")}  # the alarm engine's records say "type"
+             "kind": e.get("kind") or e.get("type"),  # the alarm engine's records say "type"
+             "t_s": (e["t_ns"] - t0) / 1e9 if isinstance(e.get("t_ns"), int) and t0 else None}
             for e in read_events_file(side)]
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
