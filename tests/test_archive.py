@@ -269,5 +269,5 @@ def test_doc_query_test_point_stats_equals_the_report(archived):
         (tp,) = digest_recording(recs / f"{r[2]}.rdrlog", ref_path=load_path(PATH)).test_points()
         assert tp["label"] == r[3] and tp["samples"] == r[6] > 1000
         for got, want in zip(r[7:], (tp["dy_rms_m"], tp["dy_max_abs_m"], tp["dz_rms_m"],
-                                     tp["dz_max_abs_m"])):
+                                     tp["dz_max_abs_m"]), strict=True):
             assert math.isclose(got, want, rel_tol=1e-9), (r, tp)

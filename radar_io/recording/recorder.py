@@ -25,8 +25,9 @@ reports the free space with a low-space warning below ``low_space_bytes``.
 
 Events of a recording go to ``<id>.events.jsonl`` beside it, one JSON object per line:
 ``{"kind", "t_ns", "mono_ns", ...}`` with kinds ``go`` (``edge``: rise / fall), ``sync``
-(SEQ, TOD; also indexed in ``<id>.sync.jsonl`` as before), ``clock_step`` (``step_s``)
-and ``alarm`` (from the alarm engine). A wall-clock step (the wall clock moved more than
+(SEQ, TOD; also indexed in ``<id>.sync.jsonl`` as before), ``clock_step`` (``step_s``),
+``alarm`` (from the alarm engine) and ``annotation`` (:meth:`Recorder.annotate`: notes,
+markers, test points; ``annotation_kind, label, text, id, actor``). A wall-clock step (the wall clock moved more than
 ``CLOCK_STEP_S`` more or less than the monotonic clock between two chunks) is detected in
 ``on_chunk`` and shown on the status (:meth:`clock_status`).
 """

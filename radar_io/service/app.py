@@ -40,8 +40,8 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     """The service app for ``cfg``; refuses a configuration that can never work
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
     from radar_io.service.alarms import attach_alarms, status_loop
-    from radar_io.service.lookback import LookBack
     from radar_io.service.audit import AuditMiddleware, ReadGuard
+    from radar_io.service.lookback import LookBack
     from radar_io.service.routers import (
         access,
         alarms,
@@ -80,7 +80,8 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
                   description="Live tracking-radar data, recordings, replay and calibration. "
                   "Units: metres and degrees; field names carry their unit. Control "
                   "endpoints need `Authorization: Bearer <token>` of a role allowed to use "
-                  "them (viewer < operator < admin); each is recorded in the audit trail. Every error answers "
+                  "them (viewer < operator < admin); each is recorded in the audit trail. "
+                  "Every error answers "
                   '`{"detail": [{"loc": [...], "msg": "...", "type": "..."}]}`.')
     app.state.service = state
     app.state.lookback = lookback

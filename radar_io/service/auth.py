@@ -140,6 +140,7 @@ class Authenticator:
         self._checked = 0.0
         self._cache: dict[bytes, Principal] = {}  # sha256(token) → who
         self._lock = threading.Lock()
+        self.limiter: Any = None  #: the scrypt checks' thread limiter (routers/deps.py)
         if self.file is not None:
             self._reload(force=True)  # a malformed file is refused at start
 
@@ -174,7 +175,9 @@ class Authenticator:
             self._stamp = stamp
 
     def cached(self, token: str) -> Principal | None:
-        """The principal of an already verified token (no scrypt; safe on the event loop)."""
+        """The principal of an already verified token (no scrypt; on the event loop: at most
+        one ``stat`` of the tokens file a second, and a read of that small file when it
+        changed)."""
         if self.env_token is not None and hmac.compare_digest(token.encode(),
                                                               self.env_token.encode()):
             return Principal(ENV_ACTOR, "admin")
@@ -265,18 +268,10 @@ class JsonlLog:
 
     def read(self) -> Iterator[dict[str, Any]]:
         """Every record on disk, oldest first (bad lines skipped)."""
+        from radar_io.sinks.ch10 import read_events_file
+
         for p in self.files():
-            try:
-                with open(p, encoding="utf-8") as f:
-                    for line in f:
-                        try:
-                            rec = json.loads(line)
-                        except ValueError:
-                            continue
-                        if isinstance(rec, dict):
-                            yield rec
-            except OSError:
-                continue
+            yield from read_events_file(p)
 
     def _rotate(self) -> None:
         for k in range(self.keep - 1, 0, -1):

@@ -33,7 +33,8 @@ def test_actor_role_hiding_and_marks(tmp_path, browser):  # noqa: F811
         assert hidden == [True, True, True]
         _sign_in(browser, op)
         browser.wait_for("radarAccess.role === 'operator'", 10)
-        shown = browser.eval("['rec-start', 'mark', 'apply', 'rw-go'].map(i => document.getElementById(i).hidden)")
+        shown = browser.eval("['rec-start', 'mark', 'apply', 'rw-go']"
+                             ".map(i => document.getElementById(i).hidden)")
         assert shown == [False, False, True, True]  # calibration and runway: admin only
         browser.eval("document.getElementById('mark-kind').value = 'test_point_start';"
                      "document.getElementById('mark-label').value = 'TP7'; true")

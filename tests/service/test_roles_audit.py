@@ -11,8 +11,6 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
-import pytest
-
 from radar_io.service.auth import Authenticator, TokensFile
 from radar_io.service.config import ServiceConfig
 

@@ -57,7 +57,7 @@ async def annotate(body: AnnotationIn, who: Principal = Depends(OPERATOR_DEP),
 
 
 @router.get("/api/annotations", responses=responses(404, 422))
-def annotations(recording: str | None = Query(None, pattern=ID_PATTERN,
+def list_annotations(recording: str | None = Query(None, pattern=ID_PATTERN,
                                               description="recording id; none = all"),
                 state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Annotations, oldest first: ``{"annotations": [{id, kind, label, text, t_ns, actor,

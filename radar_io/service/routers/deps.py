@@ -72,8 +72,7 @@ def require_role(role: str) -> Any:
         state = service_of(request)
         route = request.scope.get("route")
         mark: dict[str, Any] = {"action": getattr(route, "name", request.url.path),
-                                "needs": role, "actor": None, "role": None,
-                                "params": await _params(request)}
+                                "actor": None, "role": None, "params": await _params(request)}
         request.state.audit = mark
         if not state.auth.enabled:
             raise HTTPException(403, f"control is disabled: no token configured (set "
@@ -96,31 +95,21 @@ def require_role(role: str) -> Any:
 
 async def principal_of(state: ServiceState, token: str) -> Principal | None:
     """Who holds ``token`` (None: nobody): from the cache on the loop, else one scrypt on
-    the auth thread pool (at most :data:`AUTH_THREADS` at once)."""
+    a worker thread (at most :data:`AUTH_THREADS` at once, per service)."""
     who = state.auth.cached(token)
     if who is not None or state.auth.file is None:
         return who
+    import anyio
     import anyio.to_thread
 
-    return await anyio.to_thread.run_sync(state.auth.verify, token, limiter=_auth_limiter())
-
-
-_LIMITER: Any = None
-
-
-def _auth_limiter() -> Any:
-    global _LIMITER
-    if _LIMITER is None:
-        import anyio
-
-        _LIMITER = anyio.CapacityLimiter(AUTH_THREADS)
-    return _LIMITER
+    if state.auth.limiter is None:  # created on the service's own event loop
+        state.auth.limiter = anyio.CapacityLimiter(AUTH_THREADS)
+    return await anyio.to_thread.run_sync(state.auth.verify, token, limiter=state.auth.limiter)
 
 
 OPERATOR_DEP = require_role("operator")
 ADMIN_DEP = require_role("admin")
 #: ``dependencies=CONTROL`` on a route: an operator (record, replay, annotate, acknowledge)
 CONTROL = [Depends(OPERATOR_DEP)]
-OPERATOR = CONTROL
 #: calibration, runway, tokens, the audit log
 ADMIN = [Depends(ADMIN_DEP)]
