@@ -52,6 +52,18 @@ def campaign(tmp_path_factory):
     _record(recs / "flight-1.rdrlog", payloads["flight-1"], DAY1, site=load_site(SITE))
     _record(recs / "flight-2.rdrlog", payloads["flight-2"], DAY1 + dt.timedelta(hours=2))
     _record(recs / "flight-3.rdrlog", payloads["flight-3"], DAY2)
+    # test points, added after the flight (radar-io annotate): TP1 in flight-2, TP2 (and a
+    # marker inside it) in flight-3
+    for rec, start, kind, label, after_s in (
+            ("flight-2", DAY1 + dt.timedelta(hours=2), "test_point_start", "TP1", 1.5),
+            ("flight-2", DAY1 + dt.timedelta(hours=2), "test_point_end", "TP1", 4.0),
+            ("flight-3", DAY2, "test_point_start", "TP2", 2.0),
+            ("flight-3", DAY2, "marker", "gust", 3.0),
+            ("flight-3", DAY2, "test_point_end", "TP2", 5.0)):
+        t_ns = int(start.timestamp() * 1e9) + int(after_s * 1e9)
+        r = run_cli("annotate", str(recs / f"{rec}.rdrlog"), "--kind", kind, "--label", label,
+                    "--t-ns", str(t_ns))
+        assert r.returncode == 0, r.stderr
     return d, payloads
 
 
@@ -242,3 +254,20 @@ def test_a_damaged_recording_is_one_line_and_the_others_are_archived(campaign, t
     with RecordingReader(good) as rd:
         want = len(decode_bytes(b"".join(c.data for c in rd)))
     assert pq.read_metadata(out / files[0]).num_rows == want > 0
+
+
+def test_doc_query_test_point_stats_equals_the_report(archived):
+    """The doc's test-point query (DuckDB, frames joined to the events table) gives the
+    report's DY / DZ RMS and max |.| per test point."""
+    from radar_io.analysis.flight_digest import digest_recording
+
+    out, _ = archived
+    rows = _run(_doc_queries()["test_point_stats"], out)
+    assert [(r[2], r[3]) for r in rows] == [("flight-2", "TP1"), ("flight-3", "TP2")]
+    recs = out.parent / "recordings"
+    for r in rows:
+        (tp,) = digest_recording(recs / f"{r[2]}.rdrlog", ref_path=load_path(PATH)).test_points()
+        assert tp["label"] == r[3] and tp["samples"] == r[6] > 1000
+        for got, want in zip(r[7:], (tp["dy_rms_m"], tp["dy_max_abs_m"], tp["dz_rms_m"],
+                                     tp["dz_max_abs_m"]), strict=True):
+            assert math.isclose(got, want, rel_tol=1e-9), (r, tp)

@@ -50,7 +50,8 @@ def spark_results(spark, archived):  # noqa: F811 (the imported fixture)
     ns: dict = {}
     src = code.replace('"s3a://range/archive"', repr(str(out)))
     exec(compile(src, "analysis.md", "exec"), ns)  # the doc's own example
-    return {name: [tuple(r) for r in ns[name].collect()] for name in ("runs", "bias", "crc")}
+    return {name: [tuple(r) for r in ns[name].collect()] for name in ("runs", "bias", "crc",
+                                                                         "test_points")}
 
 
 def _same(spark_rows: list[tuple], duck_rows: list[tuple]) -> None:
@@ -66,7 +67,8 @@ def _same(spark_rows: list[tuple], duck_rows: list[tuple]) -> None:
 
 @pytest.mark.parametrize("name, query", [("runs", "dy_dz_per_run"),
                                          ("bias", "bias_per_flight"),
-                                         ("crc", "crc_errors_per_day")])
+                                         ("crc", "crc_errors_per_day"),
+                                         ("test_points", "test_point_stats")])
 def test_spark_equals_duckdb(spark_results, archived, name, query):  # noqa: F811
     out, _ = archived
     duck = _run(_doc_queries()[query], out)

@@ -16,6 +16,12 @@ the date is the UTC date of the first chunk (recording) or the file's modificati
 time (raw capture). A re-run skips a recording whose archived file names the same
 source SHA-256 and options, and rewrites it otherwise (atomically: never a half file).
 Memory is constant: the recording is read and decoded in blocks.
+
+The recording's events (``<id>.events.jsonl``: GO edges, sync, clock steps, alarms,
+annotations — test points among them) go beside its frames as ``events.jsonl`` in the same
+partition, one JSON object per line with fixed columns (:data:`EVENT_COLUMNS`): DuckDB
+reads them with ``read_json('OUT/**/events.jsonl', hive_partitioning = true)`` and joins
+them to the frames on ``recording``; the ``OUT/**/*.parquet`` globs still see frames only.
 """
 
 from __future__ import annotations
@@ -32,6 +38,11 @@ from radar_io.errors import ConfigError
 
 #: the file inside each recording's partition
 PART_NAME = "part-0.parquet"
+#: the recording's events beside its frames (JSON lines, one fixed set of columns)
+EVENTS_NAME = "events.jsonl"
+#: the columns of the events table (absent fields are null)
+EVENT_COLUMNS = ("kind", "t_ns", "t_s", "mono_ns", "annotation_kind", "label", "text", "id", "actor",
+                 "edge", "seq", "tod_s", "name", "step_s")
 #: extensions collected when a directory is given
 RECORDING_SUFFIXES = (".rdrlog",)
 
@@ -120,6 +131,7 @@ def archive_recording(path: str | os.PathLike[str], out_dir: str | os.PathLike[s
                "path_name": getattr(reference_path, "name", "") if reference_path else ""}
     meta = output_metadata(spec, site_obj, calibration, source=src, source_sha256=sha,
                            **options)
+    write_events(src, out.parent / EVENTS_NAME)
     if not force and out.exists():
         old = _archived_meta(out)
         keys = ("source_sha256", "spec_sha256", "calibration_id", "site", "archive_site",
@@ -151,6 +163,34 @@ def archive_recording(path: str | os.PathLike[str], out_dir: str | os.PathLike[s
         writer.abort()
         raise
     return ArchiveResult(src, out, writer.rows, True, dict(stats), list(report.problems))
+
+
+def write_events(src: Path, out: Path) -> int:
+    """The recording's ``<id>.events.jsonl`` (go, sync, clock_step, alarm, annotation) as
+    the partition's events table: every line with the :data:`EVENT_COLUMNS` (null when
+    absent; ``name`` is an alarm's; ``t_s``: seconds from the recording's first chunk,
+    the report's time axis); none when the recording has no events file. Written to a
+    temporary file and renamed; returns the rows."""
+    from radar_io.recording.rdrlog import RecordingReader
+    from radar_io.sinks.ch10 import read_events_file
+
+    side = src.with_suffix(".events.jsonl")
+    if not side.is_file():
+        return 0
+    with RecordingReader(src) as r:
+        t0 = next((c.t_ns for c in r), None)
+    rows = [{**{c: e.get(c) for c in EVENT_COLUMNS},
+             "kind": e.get("kind") or e.get("type"),  # the alarm engine's records say "type"
+             "t_s": (e["t_ns"] - t0) / 1e9 if isinstance(e.get("t_ns"), int) and t0 else None}
+            for e in read_events_file(side)]
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(out.name + ".tmp")
+    import json
+
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.writelines(json.dumps(r, default=str) + "\n" for r in rows)
+    os.replace(tmp, out)
+    return len(rows)
 
 
 def find_recordings(inputs: Iterable[str | os.PathLike[str]]) -> Iterator[Path]:

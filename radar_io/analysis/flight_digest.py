@@ -19,6 +19,13 @@ Time is the frame's TOD unwrapped past midnight, in seconds from the first frame
 (``t_s``). The framer's cumulative counters are sampled after each decoded piece, which
 puts CRC errors and SEQ gaps on the timeline with the resolution of one piece
 (``piece_bytes``; 64 KiB ≈ 2 s at 1 kHz).
+
+Annotations of the recording's event log (``<id>.events.jsonl``: notes, markers, test
+point starts and ends, made live or with ``radar-io annotate``) are placed on that time
+axis by their receive time, ``t_s = (t_ns − t_ns of the first chunk) / 1e9``; a test point
+runs from a ``test_point_start`` to the next ``test_point_end`` of the same label (else the
+next end; an unended one runs to the end of the recording) and gets exact DY / DZ RMS and
+max |.| over its frames (:meth:`FlightDigest.test_points`).
 """
 
 from __future__ import annotations
@@ -121,6 +128,57 @@ class Thinned:
 
 
 @dataclass
+class _TestPoint:
+    """One test point: its label, its span on the ``t_s`` axis and its DY / DZ sums."""
+
+    label: str
+    from_s: float
+    to_s: float
+    text: str = ""
+    samples: int = 0
+    dy_sq: float = 0.0
+    dy_max: float = np.nan
+    dz_sq: float = 0.0
+    dz_n: int = 0
+    dz_max: float = np.nan
+
+    def add(self, t: np.ndarray, c: dict[str, np.ndarray]) -> None:
+        sel = (t >= self.from_s) & (t <= self.to_s)
+        if not sel.any() or "dy_m" not in c:
+            return
+        for col, sq, n, mx in (("dy_m", "dy_sq", "samples", "dy_max"),
+                               ("dz_m", "dz_sq", "dz_n", "dz_max")):
+            v = np.asarray(c[col])[sel]
+            v = v[np.isfinite(v)]
+            if v.size:
+                setattr(self, sq, getattr(self, sq) + float(np.sum(v ** 2)))
+                setattr(self, n, getattr(self, n) + int(v.size))
+                m = float(np.max(np.abs(v)))
+                setattr(self, mx, m if np.isnan(getattr(self, mx)) else max(getattr(self, mx), m))
+
+
+def test_point_spans(annotations: list[dict[str, Any]]) -> list[_TestPoint]:
+    """Test points from annotations with ``t_s`` (oldest first): a ``test_point_start``
+    ends at the next ``test_point_end`` of its label, else at the next end of any label;
+    one never ended runs to +inf (the end of the recording)."""
+    open_: list[_TestPoint] = []
+    out: list[_TestPoint] = []
+    for a in sorted(annotations, key=lambda a: a["t_s"]):
+        kind = a.get("annotation_kind")
+        if kind == "test_point_start":
+            tp = _TestPoint(str(a.get("label") or f"TP{len(out) + len(open_) + 1}"),
+                            float(a["t_s"]), np.inf, str(a.get("text") or ""))
+            open_.append(tp)
+            out.append(tp)
+        elif kind == "test_point_end" and open_:
+            same = [tp for tp in open_ if tp.label == a.get("label")]
+            tp = same[0] if same else open_[0]
+            tp.to_s = float(a["t_s"])
+            open_.remove(tp)
+    return out
+
+
+@dataclass
 class _Leg:
     samples: int = 0
     along_from_m: float = np.inf
@@ -162,6 +220,9 @@ class FlightDigest:
     site: Site | None = None
     #: alarm raise / clear / ack records from ``<recording>.events.jsonl`` (service/alarms.py)
     alarm_events: list[dict[str, Any]] = field(default_factory=list)
+    #: annotation events, each with ``t_s`` on the time axis (module docstring)
+    annotations: list[dict[str, Any]] = field(default_factory=list)
+    test_point_stats: list[_TestPoint] = field(default_factory=list)
     #: what the recording was decoded with (spec, calibration, site): for a second pass
     decode_options: dict[str, Any] = field(default_factory=dict)
 
@@ -194,6 +255,19 @@ class FlightDigest:
     def sync_events(self) -> list[dict[str, Any]]:
         """SYNC 0→1 edges: index, SEQ, TOD, time from start and SR/EL/AZ at the edge."""
         return [dict(e) for e in self.sync]
+
+    def test_points(self) -> list[dict[str, Any]]:
+        """Per test point: label, text, from_s, to_s, samples, DY / DZ RMS and max |.| (m;
+        NaN without a path or frames)."""
+        out = []
+        for tp in self.test_point_stats:
+            out.append({"label": tp.label, "text": tp.text, "from_s": tp.from_s,
+                        "to_s": min(tp.to_s, self.duration_s), "samples": tp.samples,
+                        "dy_rms_m": float(np.sqrt(tp.dy_sq / tp.samples)) if tp.samples
+                        else float("nan"), "dy_max_abs_m": tp.dy_max,
+                        "dz_rms_m": float(np.sqrt(tp.dz_sq / tp.dz_n)) if tp.dz_n
+                        else float("nan"), "dz_max_abs_m": tp.dz_max})
+        return out
 
     def legs(self) -> list[dict[str, Any]]:
         """DY / DZ RMS and maximum |value| per path element (needs a path)."""
@@ -228,6 +302,7 @@ class _Reducer:
         self.counter_t: list[float] = []
         self.counter_crc: list[int] = []
         self.counter_gap: list[int] = []
+        self.test_points: list[_TestPoint] = []
 
     def add(self, c: dict[str, np.ndarray], stats: dict[str, int]) -> None:
         tod = np.asarray(c["tod_s"], dtype=np.float64)
@@ -263,6 +338,8 @@ class _Reducer:
                               "el_deg": float(c["el_deg"][i]), "az_deg": float(c["az_deg"][i])})
         if "dy_m" in c:
             self._legs(c)
+            for tp in self.test_points:
+                tp.add(t, c)
         self.thin.add({**{k: c[k] for k in KEEP if k in c}, "t_s": t},
                       {k: c[k] for k in FLAGS}, jump_t)
         self.n += m
@@ -317,11 +394,23 @@ def digest_recording(path: str | os.PathLike[str], *, site: Site | None = None,
     if ref_path is not None and ref_path.frame == "runway" and site is None:
         raise ConfigError(f"{ref_path.name or 'path'}: a runway-frame reference path needs --site")
     header: dict[str, Any] = {}
+    first_t_ns: int | None = None
     if is_recording(path):
         with RecordingReader(path) as r:
             header = dict(r.header)
+            first_t_ns = next((c.t_ns for c in r), None)
+    events: list[dict[str, Any]] = []
+    side = Path(path).with_suffix(".events.jsonl")
+    if side.is_file():
+        from radar_io.service.alarms import read_events
+
+        events = read_events(side)
+    notes = [{**e, "t_s": (int(e["t_ns"]) - first_t_ns) / 1e9} for e in events
+             if e.get("kind") == "annotation" and isinstance(e.get("t_ns"), int)
+             and first_t_ns is not None]
     report = ReadReport()
     red = _Reducer(max_rows)
+    red.test_points = test_point_spans(notes)
     stats: dict[str, int] = {}
     for batch in iter_decode(iter_payloads(path, piece_bytes, progress, report), spec=spec,
                              calibration=calibration, site=site):
@@ -333,12 +422,6 @@ def digest_recording(path: str | os.PathLike[str], *, site: Site | None = None,
         red.add({k: batch[k] for k in (*KEEP, "tod_s") if k in batch}, stats)
     if red.n == 0:
         raise ConfigError(f"{path}: no RDR1 frames found")
-    events: list[dict[str, Any]] = []
-    side = Path(path).with_suffix(".events.jsonl")
-    if side.is_file():
-        from radar_io.service.alarms import read_events
-
-        events = [e for e in read_events(side) if e.get("type") == "alarm"]
     thin = red.thin
     return FlightDigest(
         source=str(path), columns=thin.columns(), stats=dict(stats),
@@ -347,7 +430,9 @@ def digest_recording(path: str | os.PathLike[str], *, site: Site | None = None,
         n_frames=red.n, go_frames=red.go, rx_good_frames=red.good, duration_s=red.t_last,
         stride=thin.stride, flag_min=thin.flag_minima(), seq_jump_t_s=thin.jumps(),
         sync=red.sync, leg_stats=red.legs, header=header, problems=list(report.problems),
-        path=ref_path, site=site, alarm_events=events,
+        path=ref_path, site=site,
+        alarm_events=[e for e in events if e.get("type") == "alarm"],
+        annotations=sorted(notes, key=lambda e: e["t_s"]), test_point_stats=red.test_points,
         decode_options={"spec": spec, "calibration": calibration, "site": site})
 
 

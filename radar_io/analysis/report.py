@@ -9,8 +9,12 @@ Figures (matplotlib, Agg backend, decimated to a few thousand points each):
 5. CRC errors and SEQ gaps (cumulative) on the timeline, with GO and RX GOOD;
 6. pressure altitude − radar height vs time (needs an airborne CAN log).
 
+Annotations (notes, markers, test points) are drawn on the time plots (4, 5 and, with a
+path, DY / DZ vs time), test points shaded.
+
 Tables: the summary (duration, frames, CRC errors, gaps, GO time, RX GOOD fraction,
-DY / DZ RMS and max |.| per leg), the alarm events of the recording's event log
+DY / DZ RMS and max |.| per leg), the test points (span, DY / DZ RMS and max |.| each),
+the annotations, the alarm events of the recording's event log
 (``<id>.events.jsonl``, when there is one) and the sync events with their times.
 
 HTML embeds every figure as a base64 PNG (no external file, no script, no CDN);
@@ -143,6 +147,40 @@ def _fig_deviation(d: FlightDigest) -> Any:
     return fig
 
 
+def _mark_annotations(axes: Any, d: FlightDigest) -> None:
+    """Annotations as vertical lines on time axes (``t_s``), labelled on the first axis;
+    test points shaded from start to end."""
+    axes = list(np.ravel(axes))
+    for tp in d.test_points():
+        for a in axes:
+            a.axvspan(tp["from_s"], tp["to_s"], color="tab:purple", alpha=0.08, lw=0)
+    for e in d.annotations:
+        for a in axes:
+            a.axvline(e["t_s"], color="tab:purple", lw=0.8, ls="--")
+        axes[0].annotate(str(e.get("label") or e.get("annotation_kind", "")), (e["t_s"], 1),
+                         xycoords=("data", "axes fraction"), fontsize=7, color="tab:purple",
+                         rotation=90, va="top", ha="right")
+
+
+def _fig_deviation_time(d: FlightDigest) -> Any:
+    """DY and DZ vs time with the test points marked."""
+    plt = _plt()
+    c = d.columns
+    i = d.plot_index(6000)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    a1.plot(c["t_s"][i], c["dy_m"][i], lw=0.6, color="tab:blue", rasterized=True)
+    a1.set_ylabel("DY [m]")
+    a2.plot(c["t_s"][i], c["dz_m"][i], lw=0.6, color="tab:green", rasterized=True)
+    a2.set_ylabel("DZ [m]")
+    a2.set_xlabel("time from first frame [s]")
+    for a in (a1, a2):
+        a.axhline(0, color="k", lw=0.5)
+        a.grid(alpha=0.3)
+    _mark_annotations((a1, a2), d)
+    a1.set_title("DY and DZ vs time, test points shaded")
+    return fig
+
+
 def _fig_angles(d: FlightDigest) -> Any:
     plt = _plt()
     c = d.columns
@@ -160,6 +198,7 @@ def _fig_angles(d: FlightDigest) -> Any:
             a.grid(alpha=0.3)
     for a in axes[-1]:
         a.set_xlabel("time from first frame [s]")
+    _mark_annotations(axes, d)
     fig.suptitle("Radar measurements and servo errors vs time")
     fig.tight_layout()
     return fig
@@ -191,6 +230,7 @@ def _fig_link(d: FlightDigest) -> Any:
     a2.set_xlabel("time from first frame [s]")
     a2.legend(fontsize=8, loc="center right")
     a2.grid(alpha=0.3)
+    _mark_annotations((a1, a2), d)
     return fig
 
 
@@ -238,6 +278,9 @@ def build_report(d: FlightDigest, *, airdata: str | os.PathLike[str] | None = No
     rep.figures.append(("Height vs range", _fig_height(d)))
     if "dy_m" in d.columns:
         rep.figures.append(("DY and DZ vs along-track distance", _fig_deviation(d)))
+        if d.annotations:
+            rep.figures.append(("DY and DZ vs time, with the annotations",
+                                _fig_deviation_time(d)))
     rep.figures.append(("SR / EL / AZ and servo errors", _fig_angles(d)))
     rep.figures.append(("CRC errors and SEQ gaps", _fig_link(d)))
     if airdata is not None:
@@ -277,6 +320,9 @@ LEG_HEAD = ("leg", "kind", "along from [m]", "along to [m]", "samples", "DY RMS 
 SYNC_HEAD = ("#", "SEQ", "TOD [s]", "t [s]", "RX GOOD", "SR [m]", "EL [deg]", "AZ [deg]")
 
 
+TP_HEAD = ("test point", "from [s]", "to [s]", "samples", "DY RMS [m]", "DY max |.| [m]",
+           "DZ RMS [m]", "DZ max |.| [m]", "text")
+NOTE_HEAD = ("t [s]", "time (UTC)", "kind", "label", "text", "by")
 ALARM_HEAD = ("time (UTC)", "SEQ", "action", "alarm", "column", "value", "limit")
 
 
@@ -291,6 +337,27 @@ def _alarm_rows(rep: Report) -> list[tuple[str, ...]]:
              str(e.get("name", e.get("id", ""))), str(e.get("column", "")),
              _num_text(e.get("value")), _num_text(e.get("limit")))
             for e in rep.digest.alarm_events]
+
+
+def _tp_rows(rep: Report) -> list[tuple[str, ...]]:
+    def f(v: float) -> str:
+        return "" if not np.isfinite(v) else f"{v:.2f}"
+
+    return [(g["label"], f"{g['from_s']:.1f}", f"{g['to_s']:.1f}", str(g["samples"]),
+             f(g["dy_rms_m"]), f(g["dy_max_abs_m"]), f(g["dz_rms_m"]), f(g["dz_max_abs_m"]),
+             g["text"]) for g in rep.digest.test_points()]
+
+
+def _note_rows(rep: Report) -> list[tuple[str, ...]]:
+    import time as _time
+
+    def utc(t_ns: int) -> str:
+        return _time.strftime("%Y-%m-%d %H:%M:%S", _time.gmtime(t_ns / 1e9)) \
+            + f".{t_ns // 1_000_000 % 1000:03d}"
+
+    return [(f"{e['t_s']:.3f}", utc(int(e["t_ns"])), str(e.get("annotation_kind", "")),
+             str(e.get("label", "")), str(e.get("text", "")), str(e.get("actor") or ""))
+            for e in rep.digest.annotations]
 
 
 def _leg_rows(rep: Report) -> list[tuple[str, ...]]:
@@ -339,6 +406,12 @@ def render_html(rep: Report) -> str:
              _table(None, _summary_rows(rep))]
     if rep.legs:
         parts += ["<h2>Deviation per leg</h2>", _table(LEG_HEAD, _leg_rows(rep))]
+    if rep.digest.test_point_stats:
+        parts += [f"<h2>Test points ({len(rep.digest.test_point_stats)})</h2>",
+                  _table(TP_HEAD, _tp_rows(rep))]
+    if rep.digest.annotations:
+        parts += [f"<h2>Annotations ({len(rep.digest.annotations)})</h2>",
+                  _table(NOTE_HEAD, _note_rows(rep))]
     if rep.digest.alarm_events:
         parts += [f"<h2>Alarm events ({len(rep.digest.alarm_events)})</h2>",
                   _table(ALARM_HEAD, _alarm_rows(rep))]
@@ -380,6 +453,10 @@ def render_pdf(rep: Report, out: Any) -> int:
         _table_pages(pdf, "Summary", None, _summary_rows(rep))
         if rep.legs:
             _table_pages(pdf, "Deviation per leg", LEG_HEAD, _leg_rows(rep))
+        if rep.digest.test_point_stats:
+            _table_pages(pdf, "Test points", TP_HEAD, _tp_rows(rep))
+        if rep.digest.annotations:
+            _table_pages(pdf, "Annotations", NOTE_HEAD, _note_rows(rep))
         if rep.digest.alarm_events:
             _table_pages(pdf, f"Alarm events ({len(rep.digest.alarm_events)})", ALARM_HEAD,
                          _alarm_rows(rep))

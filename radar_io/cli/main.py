@@ -19,6 +19,7 @@ COMMANDS = (
     "radar_io.cli.serve", "radar_io.cli.bench", "radar_io.cli.calibrate",
     "radar_io.cli.runway", "radar_io.cli.airborne", "radar_io.cli.archive",
     "radar_io.cli.report", "radar_io.cli.export", "radar_io.cli.doctor", "radar_io.cli.track",
+    "radar_io.cli.annotate", "radar_io.cli.token",
 )
 
 

@@ -26,6 +26,8 @@ def add_subparser(sub: Any) -> None:
                    help="record per GO period (default), only on request, or always")
     p.add_argument("--token-file", help="file holding the control token "
                    "(or set RADAR_IO_TOKEN; no token = control disabled)")
+    p.add_argument("--tokens-file", metavar="FILE", help="named tokens with roles (viewer, "
+                   "operator, admin), hashes only; see radar-io token")
     p.add_argument("--path", help="reference path TOML: deviation needles, DY/DZ in messages")
     p.add_argument("--tlm-out", help="TLM1 uplink: udp://host:port, a serial URL/device or a file")
     p.add_argument("--da-out", help="D/A recorder words: a serial URL/device or a file")
@@ -53,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = load_config(args.config, {
         "source": args.source, "host": args.host, "port": args.port, "site": args.site,
         "calibration": args.calibration, "data_dir": args.data_dir,
-        "auto_record": args.auto_record, "token_file": args.token_file, "path": args.path,
+        "auto_record": args.auto_record, "token_file": args.token_file,
+        "tokens_file": args.tokens_file, "path": args.path,
         "tlm_out": args.tlm_out, "da_out": args.da_out, "can": args.can,
         "publish": args.publish, "asterix_out": args.asterix_out})
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
@@ -70,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     port = sock.getsockname()[1]
     host = f"[{cfg.host}]" if ":" in cfg.host else cfg.host
     print(f"radar-io serve: source {cfg.source}, data in {state.data_dir.resolve()}, control "
-          f"{'enabled' if state.token else 'disabled (no token configured)'}", file=sys.stderr)
+          f"{'enabled' if state.auth.enabled else 'disabled (no token configured)'}", file=sys.stderr)
     print(f"listening on http://{host}:{port}/ (dashboard; API docs /docs)", file=sys.stderr,
           flush=True)
     # per-message deflate would compress every measurement once per client: off. Open

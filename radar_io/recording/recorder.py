@@ -25,9 +25,11 @@ reports the free space with a low-space warning below ``low_space_bytes``.
 
 Events of a recording go to ``<id>.events.jsonl`` beside it, one JSON object per line:
 ``{"kind", "t_ns", "mono_ns", ...}`` with kinds ``go`` (``edge``: rise / fall), ``sync``
-(SEQ, TOD; also indexed in ``<id>.sync.jsonl`` as before), ``clock_step`` (``step_s``)
-and ``alarm`` (from the alarm engine). A wall-clock step (the wall clock moved more than
-``CLOCK_STEP_S`` more or less than the monotonic clock between two chunks) is detected in
+(SEQ, TOD; also indexed in ``<id>.sync.jsonl`` as before), ``clock_step`` (``step_s``),
+``alarm`` (from the alarm engine) and ``annotation`` (:meth:`Recorder.annotate`: notes,
+markers, test points; ``annotation_kind, label, text, id, actor``). A wall-clock step (the
+wall clock moved more than ``CLOCK_STEP_S`` more or less than the monotonic clock between two
+chunks) is detected in
 ``on_chunk`` and shown on the status (:meth:`clock_status`).
 """
 
@@ -87,6 +89,7 @@ class _Rec:
     settled: threading.Event = field(default_factory=threading.Event)  #: opened or refused
     closed: threading.Event = field(default_factory=threading.Event)
     error: RadarIOError | None = None  #: why a manual start was refused
+    start_t_ns: int = 0  #: wall-clock receive time of its first chunk (pre-roll included)
 
 
 @dataclass(eq=False, slots=True)
@@ -142,6 +145,8 @@ class Recorder:
         #: called with the path of each recording that closed cleanly (e.g. the archiver)
         self.on_closed: Callable[[Path], None] | None = None
         self.sync_events: list[SyncEvent] = []
+        #: (id, first t_ns, last t_ns) of the recordings closed since the start, newest last
+        self._spans: deque[tuple[str, int, int]] = deque(maxlen=1000)
         self.last_error: str | None = None     #: why the disk is not keeping up (None: it is)
         self.storage_error: str | None = None  #: the last disk error (kept after recovery)
         self.storage_errors = 0
@@ -244,6 +249,23 @@ class Recorder:
             self._put_event(self._rec, kind, fields, t_ns, mono_ns)
             return self._rec.id
 
+    def annotate(self, fields: dict[str, Any], t_ns: int) -> str | None:
+        """Add an ``annotation`` event at wall-clock ``t_ns`` to the recording open at that
+        time — the open one, or one closed since the service started — through the writer
+        (any thread, never waits). Returns its id, or None when no recording held ``t_ns``."""
+        mono = time.monotonic_ns() - (time.time_ns() - t_ns)  # the same instant, monotonic
+        with self._lock:
+            rec = self._rec if self._rec is not None and t_ns >= self._rec.start_t_ns else None
+            if rec is None:
+                for rid, t0, t1 in reversed(self._spans):
+                    if t0 <= t_ns <= t1:
+                        rec = _Rec(rid, "")  # its file has closed: appended on its own
+                        break
+            if rec is None:
+                return None
+            self._put_event(rec, "annotation", fields, t_ns, mono)
+            return rec.id
+
     # -- queue (lock held) ----------------------------------------------------------------
     def _put(self, op: _Op) -> None:
         self._q.append(op)
@@ -274,7 +296,8 @@ class Recorder:
         while rid in self._ids:
             rid, k = f"{stamp}-{k}", k + 1
         self._ids.add(rid)
-        rec = self._rec = _Rec(rid, reason)
+        start = self._pre[0][0] if self._pre else (self._last_t or time.time_ns())
+        rec = self._rec = _Rec(rid, reason, start_t_ns=start)
         self._put(_Op("open", rec))
         for t, mono, d in self._pre:
             self._put_chunk(rec, d, t, mono)
@@ -284,6 +307,7 @@ class Recorder:
         rec, self._rec = self._rec, None
         self._manual = False
         if rec is not None:
+            self._spans.append((rec.id, rec.start_t_ns, self._last_t or time.time_ns()))
             self._put(_Op("close", rec))
         return rec
 

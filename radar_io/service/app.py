@@ -4,7 +4,8 @@ air data) start and stop in the lifespan.
 
 Routers, one per concern (``service/routers/``): status, live (track, ws, site, path,
 airdata), recordings, series (look-back), replay, calibration, coordinates, runway, alarms,
-report. Errors: one body shape, radar_io errors mapped by class
+report, annotations, access (whoami, audit). Roles and the audit trail: :mod:`radar_io.service.auth`,
+:mod:`radar_io.service.audit`. Errors: one body shape, radar_io errors mapped by class
 (:mod:`radar_io.service.errors`). Host and Origin checks, header and body limits:
 :mod:`radar_io.service.guard`; expensive requests: :mod:`radar_io.service.limits`.
 """
@@ -39,9 +40,12 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     """The service app for ``cfg``; refuses a configuration that can never work
     (ConfigError) before anything starts. Workers run only inside the lifespan."""
     from radar_io.service.alarms import attach_alarms, status_loop
+    from radar_io.service.audit import AuditMiddleware, ReadGuard
     from radar_io.service.lookback import LookBack
     from radar_io.service.routers import (
+        access,
         alarms,
+        annotations,
         calibration,
         coordinates,
         live,
@@ -75,13 +79,15 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
                   responses=responses(403, 413, 421, 422, 431),
                   description="Live tracking-radar data, recordings, replay and calibration. "
                   "Units: metres and degrees; field names carry their unit. Control "
-                  "endpoints need `Authorization: Bearer <token>`. Every error answers "
+                  "endpoints need `Authorization: Bearer <token>` of a role allowed to use "
+                  "them (viewer < operator < admin); each is recorded in the audit trail. "
+                  "Every error answers "
                   '`{"detail": [{"loc": [...], "msg": "...", "type": "..."}]}`.')
     app.state.service = state
     app.state.lookback = lookback
     install_error_handlers(app)
     for module in (status, live, recordings, series, replay, calibration, coordinates, alarms,
-                   report):
+                   report, annotations, access):
         app.include_router(module.router)
     # the runway router declares its own token dependencies (the manual pose needs none)
     app.include_router(runway.router, responses=responses(401, 403, 429))
@@ -100,6 +106,8 @@ def build_app(cfg: ServiceConfig) -> FastAPI:
     def index() -> FileResponse:
         return FileResponse(WEB_DIR / "index.html", headers={"Cache-Control": "no-cache"})
 
+    app.add_middleware(AuditMiddleware)  # one record per control request (service/audit.py)
+    app.add_middleware(ReadGuard)
     app.add_middleware(GuardMiddleware, allowed_origins=cfg.allowed_origins,
                        max_header_bytes=cfg.max_header_kb << 10,
                        max_body_bytes=cfg.max_body_kb << 10,

@@ -36,7 +36,9 @@ class ServiceConfig:
     site: str | None = None          #: site TOML; sim:// defaults to the demo site
     calibration: str | None = None   #: calibration set JSON applied at start
     data_dir: str = "radar-data"     #: recordings, sync indices, calibration sets
-    token_file: str | None = None
+    token_file: str | None = None    #: the admin token (or RADAR_IO_TOKEN)
+    tokens_file: str | None = None   #: named tokens with roles, hashes only (radar-io token)
+    require_token_for_read: bool = False  #: reads (GET /api/…, /ws/…) need a token too
     auto_record: Literal["go", "manual", "always"] = "go"
     preroll_s: Annotated[float, Ge(0.0), Le(600.0)] = 2.0
     retry_s: Annotated[float, Gt(0.0), Le(3600.0)] = 5.0  #: automatic recording: retry after a disk error

@@ -28,6 +28,7 @@ from radar_io.decoding.biases import load_calibration
 from radar_io.errors import ConfigError, NotFoundError, ValidationError
 from radar_io.recording.recorder import Recorder
 from radar_io.service.alarms import AlarmEngine
+from radar_io.service.auth import Authenticator, JsonlLog
 from radar_io.service.calibrations import CalibrationStore
 from radar_io.service.clock import ClockSync
 from radar_io.service.config import ServiceConfig
@@ -59,8 +60,13 @@ class ServiceState:
     def __init__(self, cfg: ServiceConfig) -> None:
         self.cfg = cfg
         self.token = cfg.token()
+        self.auth = Authenticator(self.token, cfg.tokens_file)
         self.data_dir = Path(cfg.data_dir)
         self.data_dir.mkdir(parents=True, exist_ok=True)
+        #: one record per control request (service/audit.py)
+        self.audit = JsonlLog(self.data_dir / "audit" / "audit.jsonl")
+        #: every annotation made through the service, whichever recording holds it
+        self.annotations = JsonlLog(self.data_dir / "annotations.jsonl", max_bytes=1 << 40)
         self.spec = load_spec(cfg.spec) if cfg.spec else load_spec()
         site_path = cfg.resolved_site()
         self.site = load_site(site_path) if site_path else None
@@ -218,6 +224,8 @@ class ServiceState:
             steps.append(("runway jobs", lambda: self.runway_jobs.close(sd.left_s())))
         steps.append(("expensive requests", self.limits.close))
         steps += [(f"sink {n}", w.close) for n, w in self.sinks.items()]
+        steps += [("audit log", lambda: self.audit.close(min(2.0, sd.left_s()))),
+                  ("annotations log", lambda: self.annotations.close(min(2.0, sd.left_s())))]
         if self.mqtt is not None:
             steps.append(("mqtt", self.mqtt.close))  # last word on PREFIX/status: offline
         if self.air is not None:
@@ -268,7 +276,9 @@ class ServiceState:
         st["calibration"] = self.live.calibration.id
         st["calibration_error"] = self.calibrations.error  # unreadable active.json at start
         st["calibration_last_good"] = self.calibrations.last_good
-        st["control_enabled"] = self.token is not None
+        st["control_enabled"] = self.auth.enabled
+        st["audit"] = {"written": self.audit.written, "dropped": self.audit.dropped,
+                       "last_error": self.audit.last_error}
         st["replays"] = self.replays.brief()
         st["site"] = self.site.name if self.site else None
         st["version"] = __version__

@@ -10,7 +10,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from radar_io.decoding.biases import BIAS_LIMITS, FORMAT, Calibration, utc_now_iso
 from radar_io.service.errors import responses
-from radar_io.service.routers.deps import CONTROL, get_state
+from radar_io.service.routers.deps import ADMIN, get_state
 from radar_io.service.state import ID_PATTERN, ServiceState, check_id
 
 router = APIRouter(tags=["calibration"])
@@ -66,7 +66,7 @@ def get_calibration(state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     return state.live.calibration.to_dict()
 
 
-@router.put("/api/calibration", tags=["control"], dependencies=CONTROL,
+@router.put("/api/calibration", tags=["control"], dependencies=ADMIN,
             responses=responses(401, 403, 422, 507))
 def put_calibration(doc: CalibrationDoc = Body(..., examples=[{
         "format": "radar_io-calibration/1", "id": "flight-7",
@@ -82,7 +82,7 @@ def put_calibration(doc: CalibrationDoc = Body(..., examples=[{
     return cal.to_dict()
 
 
-@router.post("/api/calibration/bias", tags=["control"], dependencies=CONTROL,
+@router.post("/api/calibration/bias", tags=["control"], dependencies=ADMIN,
              responses=responses(401, 403, 404, 422))
 def estimate_bias(req: BiasRequest, state: ServiceState = Depends(get_state)) -> dict[str, Any]:
     """Pair photo positions with the radar's SR'/EL'/AZ' at the recorded sync events and

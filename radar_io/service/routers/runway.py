@@ -18,13 +18,13 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
 from radar_io.service.errors import responses
-from radar_io.service.routers.deps import require_token
+from radar_io.service.routers.deps import ADMIN
 from radar_io.service.runway_jobs import DEFAULT_TIMEOUT_S, MAX_FRAMES, RunwayJobs
 
 MAX_BODY = 512 << 20   #: bytes accepted for one upload (config max_upload_mb)
@@ -154,7 +154,7 @@ _UPLOAD_BODY = {"requestBody": {"required": True, "description": "the image or v
                                                        "application/octet-stream")}}}
 
 
-@router.post("/api/runway", dependencies=[Depends(require_token)], status_code=200,
+@router.post("/api/runway", dependencies=ADMIN, status_code=200,
              openapi_extra=_UPLOAD_BODY,
              responses={202: {"description": "video accepted as a job: {job, status_url}"},
                         **responses(401, 403, 413, 422, 429)})
@@ -212,7 +212,7 @@ def runway_job(request: Request, job_id: str) -> dict[str, Any]:
         raise HTTPException(404, str(exc)) from exc
 
 
-@router.delete("/api/runway/jobs/{job_id}", dependencies=[Depends(require_token)],
+@router.delete("/api/runway/jobs/{job_id}", dependencies=ADMIN,
                responses=responses(401, 403, 404))
 def runway_job_cancel(request: Request, job_id: str) -> dict[str, Any]:
     """Cancel a video job (queued: at once; running: at its next frame)."""

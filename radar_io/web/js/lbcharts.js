@@ -12,12 +12,13 @@ const CHART_H = 150, Y_AXIS = 64, PAD = [10, 24, 0, 0];
 export const PLOT_W = CHART_W - Y_AXIS - PAD[1] - PAD[3];
 
 /** Marker colour of an event kind: go (edge rise / fall) green, sync amber, alarm… red,
- * clock… pink, others grey. */
+ * clock… pink, annotations purple, others grey. */
 export function eventColor(kind) {
   if (kind.startsWith("go")) return "#2ea043";
   if (kind === "sync") return "#d29922";
   if (kind.includes("alarm")) return "#da3633";
   if (kind.includes("clock")) return "#f778ba";
+  if (kind === "annotation") return "#a371f7"; // notes, markers, test points
   return "#7a8494";
 }
 

@@ -12,6 +12,7 @@ import { initRunway } from "./runway.js";
 import { drawStripCharts, initStripCharts } from "./stripchart.js";
 import { initAlarms } from "./alarms.js";
 import { closeLookback, initLookback, openLookback, readUrl } from "./lookback.js";
+import { initAccess } from "./access.js";
 
 function render(now) {
   requestAnimationFrame(render);
@@ -44,6 +45,7 @@ initCalibration();
 initRunway();
 initStripCharts();
 initAlarms();
+initAccess();
 initLookback(() => window.radarStrip.available);
 $("to-live").onclick = () => { closeLookback(); S.dirty = true; };
 $("to-lookback").onclick = () => { const id = $("rec-list").value; if (id) lookAt(id); };
