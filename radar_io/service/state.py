@@ -107,18 +107,22 @@ class ServiceState:
         self._shutdown: Any = None  # service.shutdown.Shutdown once a stop has begun
 
     def _track_params(self, cfg: ServiceConfig) -> Any:
-        """The live filter's parameters (config keys, else the site, else TR-861), its
-        kernels compiled now (numba), before the radar streams; the cost is logged."""
-        from radar_io.tracking.live import warm_up
+        """The live filter's parameters: config keys, else the site, else TR-861."""
         from radar_io.tracking.tracker import TrackParams
 
-        params = TrackParams.for_site(self.site, q_mps2=cfg.track_q_mps2,
-                                      sigma_range_m=cfg.track_sigma_range_m,
-                                      sigma_angle_deg=cfg.track_sigma_angle_deg)
+        return TrackParams.for_site(self.site, q_mps2=cfg.track_q_mps2,
+                                    sigma_range_m=cfg.track_sigma_range_m,
+                                    sigma_angle_deg=cfg.track_sigma_angle_deg)
+
+    def _warm_up_tracking(self) -> None:
+        """Compile (numba) the live filter's kernels now, before the reader opens the radar,
+        not on its first frame; the cost is logged."""
+        from radar_io.tracking.live import warm_up
+
+        p = self.track_params
         self.track_warm_up_s = warm_up()
-        log.info("tracking filter ready (q %g m²/s³, σ %g m, %g°) in %.2f s", params.q_mps2,
-                 params.sigma_range_m, params.sigma_angle_deg, self.track_warm_up_s)
-        return params
+        log.info("tracking filter ready (q %g m²/s³, σ %g m, %g°) in %.2f s", p.q_mps2,
+                 p.sigma_range_m, p.sigma_angle_deg, self.track_warm_up_s)
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
         """Reference path, TLM1 / D/A sinks and CAN air data, as configured; a configuration
@@ -185,6 +189,7 @@ class ServiceState:
             self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options,
                                               backlog=self.recorder.dir.glob("*.rdrlog"))
             self.recorder.on_closed = self.archiver.submit
+        self._warm_up_tracking()
         self.replays.start(loop)
         self.live.start()
 
