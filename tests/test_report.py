@@ -343,6 +343,6 @@ def test_bet_page_smooths_a_decimated_set_against_the_simulator_truth(flight):
     for c, lim in (("sr_m", 5.0), ("el_deg", 0.02), ("az_deg", 0.02)):
         assert p.summary[f"residual_{c}_rms"] < lim, c
     rows = dict(bet_page.summary_rows(p))
-    assert rows["measurements smoothed"].startswith(f"{len(p.track)} (every {p.stride}.")
+    assert rows["measurements smoothed"].startswith(f"{len(p.track)} (1 frame in {p.stride})")
     full = bet_page.build_bet(d)  # the default: every frame of a 40-s recording
     assert full is not None and full.stride == 1 and len(full.track) == d.n_frames

@@ -113,7 +113,7 @@ def figures(p: BetPage) -> list[tuple[str, Any]]:
         a.set_ylabel(label)
         a.grid(alpha=0.3)
     ax[0].legend(fontsize=8, loc="best")
-    ax[0].set_title(f"Best estimate of trajectory (RTS smoother, every {p.stride}. frame): "
+    ax[0].set_title(f"Best estimate of trajectory (RTS smoother, 1 frame in {p.stride}): "
                     "±3σ bands")
     ax[-1].set_xlabel("time from first frame [s]")
     fig1.tight_layout()
@@ -159,7 +159,7 @@ def figures(p: BetPage) -> list[tuple[str, Any]]:
 def summary_rows(p: BetPage, calibration: Any = None) -> list[tuple[str, str]]:
     """The page's table: decimation, model, results, the biases in use."""
     s, prm = p.summary, p.params
-    rows = [("measurements smoothed", f"{s['rows']} (every {p.stride}. frame)"),
+    rows = [("measurements smoothed", f"{s['rows']} (1 frame in {p.stride})"),
             ("model", f"CV, q {prm.q_mps2:g} m²/s³, σ range {prm.sigma_range_m:g} m, "
                       f"σ angle {prm.sigma_angle_deg:g}°, gate NIS {prm.gate_nis:g}"),
             ("tracks", s["tracking.tracks"]),
