@@ -80,7 +80,7 @@ def build_bet(d: FlightDigest, max_rows: int = MAX_ROWS) -> BetPage | None:
     out = np.flatnonzero(np.asarray(trk["outlier"]) != 0)
     outliers = [(float(t_s[i]), int(cols["seq"][i]), float(trk["nis"][i]))
                 for i in out[:MAX_OUTLIER_ROWS]]
-    info = {"stride": stride, "rows": int(len(trk)), **summary.metadata()}
+    info = {"stride": stride, "rows": len(trk), **summary.metadata()}
     for k, v in res.items():
         v = v[good & (np.asarray(trk["outlier"]) == 0)]
         v = v[np.isfinite(v)]
@@ -106,7 +106,7 @@ def figures(p: BetPage) -> list[tuple[str, Any]]:
             (np.asarray(k["h_m"])[i], np.asarray(k["h_sigma_m"], dtype=float)[i], "H [m]"),
             (gs, gs_sigma, "ground speed [m/s]"),
             (np.asarray(k["vs_mps"])[i], np.asarray(k["vh_sigma_mps"], dtype=float)[i],
-             "vertical speed [m/s]"))):
+             "vertical speed [m/s]")), strict=True):
         a.fill_between(t, v - 3 * s, v + 3 * s, color="tab:blue", alpha=0.25, lw=0,
                        label="±3σ")
         a.plot(t, v, lw=0.8, color="tab:blue", label="smoothed")
@@ -123,7 +123,8 @@ def figures(p: BetPage) -> list[tuple[str, Any]]:
     fig2, ax2 = plt.subplots(3, 1, figsize=(10, 7), sharex=True)
     for a, (c, sig, label) in zip(ax2, (("sr_m", prm.sigma_range_m, "SR [m]"),
                                         ("el_deg", prm.sigma_angle_deg, "EL [deg]"),
-                                        ("az_deg", prm.sigma_angle_deg, "AZ [deg]"))):
+                                        ("az_deg", prm.sigma_angle_deg, "AZ [deg]")),
+                                    strict=True):
         r = p.residuals[c][i]
         a.plot(t[~out], r[~out], ".", ms=1.5, color="tab:blue", rasterized=True)
         if out.any():
@@ -156,10 +157,11 @@ def figures(p: BetPage) -> list[tuple[str, Any]]:
             ("BET: residuals with ±3σ", fig2), ("BET: NIS over time", fig3)]
 
 
-def summary_rows(p: BetPage, calibration: Any = None) -> list[tuple[str, str]]:
+def summary_rows(p: BetPage, calibration: Any = None) -> list[tuple[str, ...]]:
     """The page's table: decimation, model, results, the biases in use."""
     s, prm = p.summary, p.params
-    rows = [("measurements smoothed", f"{s['rows']} (1 frame in {p.stride})"),
+    rows: list[tuple[str, ...]] = [
+            ("measurements smoothed", f"{s['rows']} (1 frame in {p.stride})"),
             ("model", f"CV, q {prm.q_mps2:g} m²/s³, σ range {prm.sigma_range_m:g} m, "
                       f"σ angle {prm.sigma_angle_deg:g}°, gate NIS {prm.gate_nis:g}"),
             ("tracks", s["tracking.tracks"]),

@@ -41,7 +41,7 @@ class DeviationProcessor:
                 m[c] = int(v) if c == "leg" else (None if v != v else float(v))
         if fpa:
             gpa = np.degrees(np.arctan(self.path.slope(dev["along_m"]))).tolist()
-            for m, g in zip(msgs, gpa):
+            for m, g in zip(msgs, gpa, strict=True):
                 f = m["fpa_deg"]
                 ok = g == g and f is not None
                 m.update(gpa_deg=g if g == g else None, gpa_err_deg=f - g if ok else None,

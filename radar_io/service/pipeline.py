@@ -244,7 +244,7 @@ class Pipeline:
         if self.tracker is not None:
             try:
                 self.tracker(msgs)
-            except Exception:  # noqa: BLE001 - the messages go on without the velocity
+            except Exception:  # a bug here must not stop acquisition: no velocity, that is all
                 self.processing_errors += 1
                 log.exception("tracking filter failed")
         for proc in self.processors:

@@ -119,5 +119,5 @@ class LiveTracker:
             else:
                 sr[i] = el[i] = az[i] = math.nan
                 good[i] = 0
-        for m, row in zip(msgs, self._run(n).tolist()):
-            m.update(zip(LIVE_FIELDS, [None if v != v else v for v in row]))
+        for m, row in zip(msgs, self._run(n).tolist(), strict=True):
+            m.update(zip(LIVE_FIELDS, [None if v != v else v for v in row], strict=True))

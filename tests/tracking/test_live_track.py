@@ -21,7 +21,6 @@ from radar_io.service.history import History
 from radar_io.service.pipeline import Pipeline
 from radar_io.tracking.live import LIVE_FIELDS, LiveTracker
 from radar_io.tracking.tracker import TrackParams, track_batch
-
 from tests.tracking.approach import approach_truth, measure
 
 ARTIFACTS = Path(os.environ.get("RADAR_IO_ARTIFACTS",
@@ -42,8 +41,8 @@ def messages(batch: MeasurementBatch, lo: int, hi: int) -> list[dict]:
 
 def test_live_messages_carry_the_forward_filter_of_track_forward_only():
     """Chunks of 1 … 40 frames through one LiveTracker: every field equals the offline
-    forward filter's (to the 1e-4 it is sent with), NG frames carry the prediction, a gap longer than max_gap_s gives
-    nulls and then a new track."""
+    forward filter's (to the 1e-4 it is sent with), NG frames carry the prediction, a gap
+    longer than max_gap_s gives nulls and then a new track."""
     truth = approach_truth(200.0, 40.0)
     batch = measure(truth, ng=[(10.0, 10.5), (20.0, 26.0)], tod_start_s=86_390.0)
     params = TrackParams(q_mps2=0.8, max_gap_s=5.0)
@@ -192,7 +191,7 @@ def test_figure_live_1khz_approach_through_a_pty(tmp_path, spec):
     truth = approach_truth(1000.0, 95.0)
     batch = measure(truth, tod_start_s=43_200.0)
     i0 = 65_000  # t = 65 s: level, descent from 70 s, right turn 80 … 97 s
-    sub = MeasurementBatch({c: np.asarray(batch[c])[i0:] for c in batch.keys()})
+    sub = MeasurementBatch({c: np.asarray(batch[c])[i0:] for c in batch})
     frames = rdr1_frames(spec, sub)
     cfg = tmp_path / "serve.toml"  # no fan-out tick: every read goes out at once
     cfg.write_text('auto_record = "manual"\nws_batch_interval_s = 0.0\n')
