@@ -24,7 +24,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -39,6 +39,10 @@ from radar_io.sources import ByteSource, open_source, source_kind
 from radar_io.sources.reconnect import ReconnectingSource
 from radar_io.sources.replay import ReplaySource
 from radar_io.wirespec.frame import FrameSpec
+
+if TYPE_CHECKING:
+    from radar_io.tracking.live import LiveTracker
+    from radar_io.tracking.tracker import TrackParams
 
 log = logging.getLogger("radar_io.pipeline")
 
@@ -91,7 +95,7 @@ class Pipeline:
                  publish: Publish, *, recorder: Recorder | None = None,
                  site: Site | None = None, calibration: Calibration | None = None,
                  clock: Clock | None = None, replay: str | bool | None = None,
-                 track: Any = None, read_timeout_s: float = 0.05,
+                 track: TrackParams | None = None, read_timeout_s: float = 0.05,
                  backoff_s: tuple[float, float] = (0.1, 5.0),
                  name: str = "radar-reader") -> None:
         self.spec, self.site, self.recorder, self.history = spec, site, recorder, history
@@ -102,7 +106,7 @@ class Pipeline:
         self.replay = replay
         self.decoder = FrameDecoder(spec, calibration)
         self.framer = Framer(spec)
-        self.tracker: Any = None
+        self.tracker: LiveTracker | None = None
         if track is not None:
             from radar_io.tracking.live import LiveTracker
 
