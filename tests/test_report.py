@@ -116,7 +116,7 @@ def _html_report(flight: Path, tmp: Path) -> Path:
     r = run_cli("report", str(flight), "--site", "demo", "--path", str(DEMO_PATH), "-o", str(out))
     assert r.returncode == 0, r.stderr.decode()
     assert b"\r" not in r.stderr  # stderr is a pipe: no progress line, just the summary
-    assert b"5 figures" in r.stderr
+    assert b"8 figures" in r.stderr
     return out
 
 
@@ -124,7 +124,8 @@ def test_html_is_self_contained_with_figures_and_tables(flight, tmp_path):
     text = _html_report(flight, tmp_path).read_text(encoding="utf-8")
     assert "<script" not in text and not re.search(r"(src|href)=\"(https?:)?//", text)
     imgs = re.findall(r'src="data:image/png;base64,([^"]+)"', text)
-    assert len(imgs) == 5  # plan, height, DY/DZ, SR/EL/AZ, link health
+    assert len(imgs) == 8  # plan, height, DY/DZ, SR/EL/AZ, link health, 3 BET
+    assert "Best estimate of trajectory" in text and "BET outliers (" in text
     for b64 in imgs:
         png = base64.b64decode(b64)
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
@@ -173,7 +174,7 @@ def test_html_opens_offline_in_chromium_without_console_errors(flight, tmp_path)
         c.wait_for("document.readyState === 'complete'")
         n = c.wait_for("Array.from(document.images).every(i => i.complete && i.naturalWidth > 0)"
                        " && document.images.length")
-        assert n == 5
+        assert n == 8
         widths = c.eval("Array.from(document.images).map(i => i.naturalWidth)")
         assert all(w >= 600 for w in widths)
         c.eval("1")  # drain pending events
@@ -210,8 +211,8 @@ def test_pdf_pages_and_figures(flight, tmp_path):
     data = out.read_bytes()
     assert data.startswith(b"%PDF-") and data.rstrip().endswith(b"%%EOF")
     n_sync = len(digest_recording(flight).sync_events())
-    # summary + legs + sync-event pages (40 rows each) + 5 figures
-    expected = 1 + 1 + -(-n_sync // 40) + 5
+    # summary + legs + sync-event pages (40 rows each) + BET table and outliers + 8 figures
+    expected = 1 + 1 + -(-n_sync // 40) + 2 + 8
     assert _pdf_pages(data) == expected
     assert f"{expected} pages".encode() in r.stderr
     # without a path: no DY/DZ figure, no leg table
@@ -223,7 +224,7 @@ def test_pdf_pages_and_figures(flight, tmp_path):
 
 def test_airdata_adds_the_pressure_altitude_figure(tmp_path):
     """A radar recording and an airborne CAN log of the same simulated flight: the report's
-    PA − H statistics equal those of `radar-io align`, and a sixth figure appears."""
+    PA − H statistics equal those of `radar-io align`, and a last figure appears."""
     from radar_io.analysis.flight_digest import digest_recording
     from radar_io.analysis.report import build_report
 
@@ -241,13 +242,13 @@ def test_airdata_adds_the_pressure_altitude_figure(tmp_path):
         assert rep.airdata["samples"] == want["n"] > 100
         assert rep.airdata["mean_m"] == pytest.approx(want["mean"], abs=1e-9)
         assert [t for t, _ in rep.figures][-1] == "Pressure altitude − radar height"
-        assert len(rep.figures) == 5
+        assert len(rep.figures) == 8
     finally:
         rep.close()
     out = tmp_path / "air.pdf"
     r = run_cli("report", str(rec), "--airdata", str(log), "-o", str(out))
     assert r.returncode == 0, r.stderr.decode()
-    assert b"5 figures" in r.stderr  # plan, height, SR/EL/AZ, link, air data (no path: no DY/DZ)
+    assert b"8 figures" in r.stderr  # plan, height, SR/EL/AZ, link, 3 BET, air data (no DY/DZ)
 
 
 @pytest.mark.parametrize("args, needle", [
@@ -316,3 +317,31 @@ def test_thinned_rows_and_flag_minima_match_the_full_decode(flight):
     full = digest_recording(flight)
     assert d.summary() == full.summary() and d.sync_events() == full.sync_events()
     assert d.frame_period_s == full.frame_period_s == pytest.approx(1e-3)
+
+
+def test_bet_page_smooths_a_decimated_set_against_the_simulator_truth(flight):
+    """The BET page in bounded memory: at most max_rows measurements (every stride-th
+    frame), the smoothed ground speed and vertical speed of the simulated level flight
+    (70 m/s, 620 m) inside their ±3σ, NIS mean near its χ²₃ value or below (the site σ
+    are TR-861's, larger than the simulator's noise), and the tables."""
+    from radar_io.analysis import bet_page
+    from radar_io.analysis.flight_digest import digest_recording
+
+    d = digest_recording(flight)
+    p = bet_page.build_bet(d, max_rows=2000)
+    assert p is not None and p.stride == -(-d.n_frames // 2000) and len(p.track) <= 2000
+    k = p.track
+    late = (p.t_s > 5.0) & np.isfinite(np.asarray(k["gs_mps"]))
+    gs, vs = np.asarray(k["gs_mps"])[late], np.asarray(k["vs_mps"])[late]
+    s_vx = np.asarray(k["vx_sigma_mps"], dtype=float)[late]
+    s_vh = np.asarray(k["vh_sigma_mps"], dtype=float)[late]
+    assert np.mean(np.abs(gs - 70.0) <= 3 * s_vx) > 0.95
+    assert np.mean(np.abs(vs) <= 3 * s_vh) > 0.95
+    assert np.median(np.abs(gs - 70.0)) < 0.5
+    assert 0.05 < float(p.summary["tracking.nis_mean"]) < 4.0
+    for c, lim in (("sr_m", 5.0), ("el_deg", 0.02), ("az_deg", 0.02)):
+        assert p.summary[f"residual_{c}_rms"] < lim, c
+    rows = dict(bet_page.summary_rows(p))
+    assert rows["measurements smoothed"].startswith(f"{len(p.track)} (1 frame in {p.stride})")
+    full = bet_page.build_bet(d)  # the default: every frame of a 40-s recording
+    assert full is not None and full.stride == 1 and len(full.track) == d.n_frames

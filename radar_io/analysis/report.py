@@ -7,7 +7,9 @@ Figures (matplotlib, Agg backend, decimated to a few thousand points each):
 3. DY and DZ vs along-track distance (the pen-recorder chart; needs a path);
 4. SR / EL / AZ and the servo errors ΔSR / ΔEL / ΔAZ vs time;
 5. CRC errors and SEQ gaps (cumulative) on the timeline, with GO and RX GOOD;
-6. pressure altitude − radar height vs time (needs an airborne CAN log).
+6. pressure altitude − radar height vs time (needs an airborne CAN log);
+7. the best estimate of trajectory (BET, :mod:`radar_io.analysis.bet_page`): smoothed
+   track with ±3σ bands, residuals with ±3σ, NIS over time, with its table and outliers.
 
 Annotations (notes, markers, test points) are drawn on the time plots (4, 5 and, with a
 path, DY / DZ vs time), test points shaded.
@@ -50,6 +52,7 @@ class Report:
     legs: list[dict[str, Any]] = field(default_factory=list)
     sync_events: list[dict[str, Any]] = field(default_factory=list)
     airdata: dict[str, Any] | None = None
+    bet: Any = None  #: a :class:`~radar_io.analysis.bet_page.BetPage` (None: no good data)
 
     def close(self) -> None:
         import matplotlib.pyplot as plt
@@ -271,8 +274,8 @@ def _airdata(d: FlightDigest, can_log: str | os.PathLike[str], dbc: Any = None
 
 
 def build_report(d: FlightDigest, *, airdata: str | os.PathLike[str] | None = None,
-                 dbc: Any = None) -> Report:
-    """All figures and tables of a digest."""
+                 dbc: Any = None, bet: bool = True) -> Report:
+    """All figures and tables of a digest (``bet``: with the BET page, a second pass)."""
     rep = Report(d, summary=d.summary(), legs=d.legs(), sync_events=d.sync_events())
     rep.figures.append(("Plan view", _fig_plan(d)))
     rep.figures.append(("Height vs range", _fig_height(d)))
@@ -283,12 +286,31 @@ def build_report(d: FlightDigest, *, airdata: str | os.PathLike[str] | None = No
                                 _fig_deviation_time(d)))
     rep.figures.append(("SR / EL / AZ and servo errors", _fig_angles(d)))
     rep.figures.append(("CRC errors and SEQ gaps", _fig_link(d)))
+    if bet:
+        from radar_io.analysis import bet_page
+
+        rep.bet = bet_page.build_bet(d)
+        if rep.bet is not None:
+            rep.figures += bet_page.figures(rep.bet)
     if airdata is not None:
         alt, info = _airdata(d, airdata, dbc)
         rep.airdata = info
         tod0 = float(d.columns["tod_s"][0])
         rep.figures.append(("Pressure altitude − radar height", _fig_airdata(alt, tod0)))
     return rep
+
+
+def _bet_tables(rep: Report) -> list[tuple[str, tuple[str, ...] | None, list[tuple[str, ...]]]]:
+    """(title, head, rows) of the BET page's tables."""
+    from radar_io.analysis import bet_page
+
+    if rep.bet is None:
+        return []
+    cal = rep.digest.decode_options.get("calibration")
+    return [("Best estimate of trajectory", None, bet_page.summary_rows(rep.bet, cal)),
+            (f"BET outliers ({rep.bet.summary['tracking.outliers']}; first "
+             f"{bet_page.MAX_OUTLIER_ROWS} listed)", bet_page.OUTLIER_HEAD,
+             bet_page.outlier_rows(rep.bet))]
 
 
 # --------------------------------------------------------------------------- tables
@@ -416,8 +438,10 @@ def render_html(rep: Report) -> str:
         parts += [f"<h2>Alarm events ({len(rep.digest.alarm_events)})</h2>",
                   _table(ALARM_HEAD, _alarm_rows(rep))]
     parts += [f"<h2>Sync events ({len(rep.sync_events)})</h2>",
-              _table(SYNC_HEAD, _sync_rows(rep)) if rep.sync_events else "<p>none</p>",
-              "<h2>Figures</h2>"]
+              _table(SYNC_HEAD, _sync_rows(rep)) if rep.sync_events else "<p>none</p>"]
+    for title, head, rows in _bet_tables(rep):
+        parts += [f"<h2>{e(title)}</h2>", _table(head, rows) if rows else "<p>none</p>"]
+    parts.append("<h2>Figures</h2>")
     for title, fig in rep.figures:
         parts.append(f"<figure><figcaption>{e(title)}</figcaption><img alt=\"{e(title)}\" "
                      f"src=\"data:image/png;base64,{_png_b64(fig)}\"></figure>")
@@ -461,6 +485,8 @@ def render_pdf(rep: Report, out: Any) -> int:
             _table_pages(pdf, f"Alarm events ({len(rep.digest.alarm_events)})", ALARM_HEAD,
                          _alarm_rows(rep))
         _table_pages(pdf, f"Sync events ({len(rep.sync_events)})", SYNC_HEAD, _sync_rows(rep))
+        for title, head, rows in _bet_tables(rep):
+            _table_pages(pdf, title, head, rows)
         for _title, fig in rep.figures:
             pdf.savefig(fig)
         pages = pdf.get_pagecount()

@@ -263,16 +263,21 @@ async def _stalled(url: str, done: asyncio.Event, ready: asyncio.Event, counter:
 
 
 def run_load(pty: Pty, base_ws: str, rate_hz: float = 1000.0, seconds: float = 5.0,
-             clients: int = 20, stalled: int = 1, msg_seq0: int = 0, seed: int = 5) -> LoadResult:
+             clients: int = 20, stalled: int = 1, msg_seq0: int = 0, seed: int = 5,
+             frames: list[bytes] | None = None) -> LoadResult:
     """Write ``rate_hz`` frames/s for ``seconds`` into the pty; receive on ``clients`` websockets.
 
     ``msg_seq0`` is the service's last msg_seq before writing (the k-th frame written
-    becomes message ``msg_seq0 + k + 1``).
+    becomes message ``msg_seq0 + k + 1``). ``frames``: these frames (``seconds`` is then
+    their count / ``rate_hz``), else the simulator's.
     """
-    n = int(rate_hz * seconds)
-    sim = RadarSimulator(config=SimConfig(seed=seed, rate_hz=rate_hz, go_delay_s=0.0))
-    data, _ = sim.generate(n)
-    frames = [data[i * 24:(i + 1) * 24] for i in range(n)]
+    if frames is None:
+        n = int(rate_hz * seconds)
+        sim = RadarSimulator(config=SimConfig(seed=seed, rate_hz=rate_hz, go_delay_s=0.0))
+        data, _ = sim.generate(n)
+        frames = [data[i * 24:(i + 1) * 24] for i in range(n)]
+    n = len(frames)
+    seconds = n / rate_hz
     res = LoadResult(n, {}, [[] for _ in range(clients - stalled)], frames)
 
     def writer(start: threading.Event) -> None:

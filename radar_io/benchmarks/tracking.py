@@ -1,6 +1,8 @@
-"""Tracking benchmark: ``radar-io track`` of a long 1 kHz recording → smoothed Parquet.
+"""Tracking benchmark: ``radar-io track`` of a long 1 kHz recording → smoothed Parquet;
+and the live filter's cost per chunk (``--live``).
 
-``python -m radar_io.benchmarks.tracking [--hours 1]`` or ``radar-io bench --tracking-hours 1``
+``python -m radar_io.benchmarks.tracking [--hours 1]`` or ``radar-io bench --tracking-hours 1``;
+``python -m radar_io.benchmarks.tracking --live`` or ``radar-io bench --tracking-live``
 
 1. Simulates ``--hours`` at 1 kHz (``radar-io simulate``; the approach repeats, so the
    track restarts at each jump back).
@@ -140,6 +142,60 @@ def run(hours: float = 1.0, workdir: str | None = None, keep: bool = False) -> d
     return res
 
 
+def live_cost(frames: int = 20_000, sizes: tuple[int, ...] = (1, 5, 20)) -> dict[str, Any]:
+    """The live pipeline's processing time per chunk (framing, decoding, the filter, JSON
+    into the history) with and without the tracking filter, simulator frames at 1 kHz
+    fed in chunks of ``sizes`` frames; and the filter's start cost (numba's cache load, or
+    compilation on a machine's first start) in a fresh process."""
+    import numpy as np
+
+    from radar_io.service.history import History
+    from radar_io.service.pipeline import Pipeline
+    from radar_io.simulation.radar import RadarSimulator, SimConfig
+    from radar_io.tracking.live import warm_up
+    from radar_io.tracking.tracker import TrackParams
+    from radar_io.wirespec.frame import load_spec
+
+    code = ("import time; t = time.perf_counter(); from radar_io.tracking.live import warm_up;"
+            " i = time.perf_counter() - t; print(i, warm_up())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    import_s, warm_s = (float(v) for v in out.stdout.split())
+    warm_up()
+    spec = load_spec()
+    sim = RadarSimulator(config=SimConfig(seed=1, rate_hz=1000.0, go_delay_s=0.0))
+    data, _ = sim.generate(frames)
+    res: dict[str, Any] = {"frames": frames, "start_import_s": import_s, "start_warm_up_s": warm_s,
+                           "loadavg": os.getloadavg()}
+    for per in sizes:
+        med: dict[str, float] = {}
+        for name, track in (("off", None), ("on", TrackParams())) * 2:
+            pipe = Pipeline("loop://", spec, History(256 << 20), lambda items: None, track=track)
+            ts = []
+            for k in range(0, frames, per):
+                chunk = data[24 * k:24 * (k + per)]
+                t0 = time.perf_counter_ns()
+                pipe._process(chunk, 0, 0)
+                ts.append(time.perf_counter_ns() - t0)
+            m = float(np.median(ts[len(ts) // 10:])) / 1e3  # µs, after the first tenth
+            med[name] = min(med.get(name, m), m)  # the better of two runs each
+        res[f"chunk{per}_off_us"], res[f"chunk{per}_on_us"] = med["off"], med["on"]
+        res[f"chunk{per}_filter_us_per_frame"] = (med["on"] - med["off"]) / per
+    return res
+
+
+def live_report(res: dict[str, Any]) -> str:
+    lines = [f"live tracking filter: start {res['start_warm_up_s']:.2f} s (numba kernels "
+             f"loaded or compiled; imports {res['start_import_s']:.2f} s), load average "
+             f"{res['loadavg'][0]:.1f}; median processing per chunk without / with the filter:"]
+    for k in res:
+        if k.endswith("_off_us"):
+            per = k[5:-7]
+            lines.append(f"  {per} frame(s) per chunk: {res[k]:.1f} / "
+                         f"{res[f'chunk{per}_on_us']:.1f} us -> "
+                         f"{res[f'chunk{per}_filter_us_per_frame']:.1f} us per frame")
+    return "\n".join(lines)
+
+
 def report(res: dict[str, Any]) -> str:
     lines = [
         (f"tracking: {res['hours']} h at 1 kHz ({res['recording_mb']:.0f} MB, {res['rows']:,} "
@@ -165,10 +221,15 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--hours", type=float, default=1.0)
     p.add_argument("--workdir", help="keep the recording here (reused on the next run)")
     p.add_argument("--json", action="store_true")
+    p.add_argument("--live", action="store_true", help="the live filter's cost per chunk only")
     p.add_argument("--anchor", metavar="REC", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.anchor:
         print(json.dumps(stonesoup_anchor(args.anchor)))
+        return 0
+    if args.live:
+        res = live_cost()
+        print(json.dumps(res, indent=2) if args.json else live_report(res))
         return 0
     res = run(args.hours, args.workdir, keep=args.workdir is not None)
     print(json.dumps(res, indent=2) if args.json else report(res))

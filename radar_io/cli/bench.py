@@ -34,6 +34,9 @@ def add_subparser(sub: Any) -> None:
                    help="also track an H-hour 1 kHz recording to smoothed Parquet through the "
                    "CLI (fresh processes: first with numba compiling, then cached; peak RSS) "
                    "beside Stone Soup's EKF + smoother per measurement; 0 to skip")
+    p.add_argument("--tracking-live", action="store_true",
+                   help="also time the live tracking filter: start cost (numba) and the "
+                   "pipeline's processing per chunk with and without it")
     p.add_argument("--fanout-clients", type=int, default=0, metavar="N",
                    help="also run N websocket clients (batch=1, or see --fanout-per-message) on "
                    "a 1 kHz serve for 10 s: /api/status latency, messages per client, lost, "
@@ -77,6 +80,11 @@ def run(args: argparse.Namespace) -> int:
 
         result["tracking"] = tracking.run(hours=args.tracking_hours)
         lines.append(tracking.report(result["tracking"]))
+    if args.tracking_live:
+        from radar_io.benchmarks import tracking
+
+        result["tracking_live"] = tracking.live_cost()
+        lines.append(tracking.live_report(result["tracking_live"]))
     if args.fanout_clients > 0:
         from radar_io.benchmarks.service_load import bench_fanout
 

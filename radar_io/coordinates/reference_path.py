@@ -161,6 +161,15 @@ class ReferencePath:
         out = np.where(s < st[0], h[0] + (s - st[0]) * self._slope_first, out)
         return np.where(s > st[-1], h[-1] + (s - st[-1]) * self._slope_last, out)
 
+    def slope(self, along_m: Any) -> np.ndarray:
+        """dH/d(along) of the path at along-track distance(s) (the height's slope between
+        the stations around each point; the first / last slope beyond the ends)."""
+        s = np.asarray(along_m, dtype=np.float64)
+        st, h = self.stations_m, self.points[:, 2]
+        slopes = np.diff(h) / np.diff(st)
+        k = np.clip(np.searchsorted(st, s, side="right") - 1, 0, slopes.size - 1)
+        return np.where(np.isfinite(s), slopes[k], np.nan)
+
     def position(self, along_m: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Path point (x, y, h) at along-track distance(s) (for plots and examples)."""
         s = np.atleast_1d(np.asarray(along_m, dtype=np.float64))

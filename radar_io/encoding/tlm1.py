@@ -203,13 +203,22 @@ def build_frames(spec: TelemetrySpec, seq: np.ndarray, words: np.ndarray) -> byt
 
 
 # ----------------------------------------------------------------- encoder
+def filter_kinematics(cols: Columns) -> dict[str, np.ndarray]:
+    """The TLM1 kinematic sources from the tracking filter's columns: ``gs_mps`` as
+    ``ground_speed_mps``, ``track_deg`` (0 … 360) folded into the channel's (-180, 180]."""
+    trk = np.mod(np.asarray(cols["track_deg"], dtype=np.float64) + 180.0, 360.0) - 180.0
+    trk[trk == -180.0] = 180.0
+    return {"ground_speed_mps": np.asarray(cols["gs_mps"], dtype=np.float64), "track_deg": trk}
+
+
 class TelemetryEncoder:
     """Measurement batches → TLM1 frames; state (SEQ, kinematics, counters) carries across batches.
 
     ``saturation[name]`` counts samples whose value lay beyond the channel's
     full scale (sent at ±full_scale_count); ``unavailable[name]`` counts frames
     where the value was NaN (sent as 0), e.g. ground speed before the
-    kinematics window has filled.
+    kinematics window has filled. A batch with the tracking filter's ``gs_mps`` and
+    ``track_deg`` (the live service's messages) sends those instead of the window's.
     """
 
     def __init__(self, spec: TelemetrySpec | None = None, *, cycle_s: float | None = None,
@@ -230,16 +239,18 @@ class TelemetryEncoder:
 
     def _sources(self, cols: Columns) -> dict[str, np.ndarray]:
         kin = None
-        if self._needs_kin and not all(k in cols for k in KINEMATIC_COLUMNS):
+        if self._needs_kin and "gs_mps" in cols and "track_deg" in cols:
+            kin = filter_kinematics(cols)  # the tracking filter's (the live service)
+        elif self._needs_kin and not all(k in cols for k in KINEMATIC_COLUMNS):
             kin = self.kinematics.update(cols)   # every batch, to keep the window current
         out = {}
         for c in self.spec.channels:
             if not c.source:
                 continue
-            if c.source in cols:
-                out[c.source] = np.asarray(cols[c.source])
-            elif kin is not None and c.source in kin:
+            if kin is not None and c.source in kin:
                 out[c.source] = kin[c.source]
+            elif c.source in cols:
+                out[c.source] = np.asarray(cols[c.source])
             else:
                 hint = COLUMN_HINTS.get(c.source)
                 raise UplinkError(f"{self.spec.name} channel {c.number} ({c.name}) needs column "

@@ -66,6 +66,11 @@ class ServiceConfig:
     max_header_kb: Annotated[int, Ge(1), Le(1024)] = 16       #: all request headers (431 beyond)
     spec: str | None = None
     path: str | None = None          #: reference path TOML: adds dy_m, dz_m, along_m, leg
+    #: live tracking filter (docs/tracking.md): white-acceleration spectral density (m²/s³)
+    track_q_mps2: Annotated[float, Gt(0.0), Le(1.0e4)] | None = None
+    #: measurement σ (default: the site's [radar] sigma_*, else TR-861's 5 m / 0.01125°)
+    track_sigma_range_m: Annotated[float, Gt(0.0), Le(1.0e4)] | None = None
+    track_sigma_angle_deg: Annotated[float, Gt(0.0), Le(10.0)] | None = None
     tlm_out: str | None = None       #: TLM1 uplink: udp://host:port, a serial URL/device or a file
     tlm_cycle_s: Annotated[float, Ge(0.0), Le(10.0)] = 0.02  #: one uplink frame per cycle
     da_out: str | None = None        #: D/A recorder words: a serial URL/device or a file

@@ -2,7 +2,8 @@
 
 A :class:`Pipeline` owns a reader thread and composes: a byte source (kept connected by
 :class:`~radar_io.sources.reconnect.ReconnectingSource`), the framer, the decoder (with
-the calibration), the site columns, extra processors (path deviation), and publishers
+the calibration), the site columns, the forward tracking filter (one per pipeline), extra
+processors (path deviation), and publishers
 (its own history's numbered messages go to its own hub). Only the live pipeline is given
 the optional parts: the recorder (raw chunks first, GO-edge recording, the sync-event
 index), and the live outputs as processors / publishers (sink fan-out, alarm feed, MQTT).
@@ -23,7 +24,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -38,6 +39,10 @@ from radar_io.sources import ByteSource, open_source, source_kind
 from radar_io.sources.reconnect import ReconnectingSource
 from radar_io.sources.replay import ReplaySource
 from radar_io.wirespec.frame import FrameSpec
+
+if TYPE_CHECKING:
+    from radar_io.tracking.live import LiveTracker
+    from radar_io.tracking.tracker import TrackParams
 
 log = logging.getLogger("radar_io.pipeline")
 
@@ -80,14 +85,18 @@ class Pipeline:
     ``source``: a URL or a :class:`ByteSource`; ``recorder``: the live recorder (None for a
     replay session: nothing recorded, no GO-edge recording, no sync index); ``clock``:
     where time stamps come from (default :class:`LiveClock`); ``replay``: put in every
-    message as ``"replay"`` (a session id, ``True`` for ``serve --source replay://``).
+    message as ``"replay"`` (a session id, ``True`` for ``serve --source replay://``);
+    ``track``: the forward filter's :class:`~radar_io.tracking.tracker.TrackParams` (this
+    pipeline gets a :class:`~radar_io.tracking.live.LiveTracker` of its own; its velocity
+    fields go in every message before the processors run), None: no filter.
     """
 
     def __init__(self, source: str | ByteSource, spec: FrameSpec, history: History,
                  publish: Publish, *, recorder: Recorder | None = None,
                  site: Site | None = None, calibration: Calibration | None = None,
                  clock: Clock | None = None, replay: str | bool | None = None,
-                 read_timeout_s: float = 0.05, backoff_s: tuple[float, float] = (0.1, 5.0),
+                 track: TrackParams | None = None, read_timeout_s: float = 0.05,
+                 backoff_s: tuple[float, float] = (0.1, 5.0),
                  name: str = "radar-reader") -> None:
         self.spec, self.site, self.recorder, self.history = spec, site, recorder, history
         self.publishers: list[Publish] = [publish]
@@ -97,6 +106,11 @@ class Pipeline:
         self.replay = replay
         self.decoder = FrameDecoder(spec, calibration)
         self.framer = Framer(spec)
+        self.tracker: LiveTracker | None = None
+        if track is not None:
+            from radar_io.tracking.live import LiveTracker
+
+            self.tracker = LiveTracker(track)
         self.processing_errors = 0
         self.go = 0
         self.rx_good = 0
@@ -194,6 +208,8 @@ class Pipeline:
         self.framer = Framer(self.spec)
         self.framer.stats = stats
         self._last_sync = 1
+        if self.tracker is not None:
+            self.tracker.reset()  # the track does not continue across the jump
 
     def _process(self, data: bytes, t_ns: int, mono_ns: int | None = None) -> None:
         rec = self.recorder
@@ -229,6 +245,12 @@ class Pipeline:
         self.rx_good = msgs[-1]["rx_good"]
         if self.site is not None:
             self._add_site_columns(msgs)
+        if self.tracker is not None:
+            try:
+                self.tracker(msgs)
+            except Exception:  # a bug here must not stop acquisition: no velocity, that is all
+                self.processing_errors += 1
+                log.exception("tracking filter failed")
         for proc in self.processors:
             try:
                 proc(msgs)

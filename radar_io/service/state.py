@@ -97,9 +97,10 @@ class ServiceState:
         #: the live pipeline: the one with the recorder, sinks, alarms, sync index and MQTT;
         #: ``serve --source replay://`` marks its messages ``"replay": true``
         ground_replay = source_kind(cfg.source) == "replay"
+        self.track_params = self._track_params(cfg)
         self.live = Pipeline(cfg.source, self.spec, self.history, self.hub.publish_threadsafe,
                              recorder=self.recorder, site=self.site, calibration=cal,
-                             replay=True if ground_replay else None)
+                             replay=True if ground_replay else None, track=self.track_params)
         self.extra_processors: list[Processor] = []  #: shared by live and replays (stateless)
         self.replays = ReplaySessions(self._session_options, max_sessions=cfg.max_replays,
                                       idle_s=cfg.replay_idle_s, ws_queue_size=cfg.ws_queue_size,
@@ -113,6 +114,24 @@ class ServiceState:
         self._setup_outputs(cfg)
         self.instance = secrets.token_hex(8)  # changes at every start: clients detect restarts
         self._shutdown: Any = None  # service.shutdown.Shutdown once a stop has begun
+
+    def _track_params(self, cfg: ServiceConfig) -> Any:
+        """The live filter's parameters: config keys, else the site, else TR-861."""
+        from radar_io.tracking.tracker import TrackParams
+
+        return TrackParams.for_site(self.site, q_mps2=cfg.track_q_mps2,
+                                    sigma_range_m=cfg.track_sigma_range_m,
+                                    sigma_angle_deg=cfg.track_sigma_angle_deg)
+
+    def _warm_up_tracking(self) -> None:
+        """Compile (numba) the live filter's kernels now, before the reader opens the radar,
+        not on its first frame; the cost is logged."""
+        from radar_io.tracking.live import warm_up
+
+        p = self.track_params
+        self.track_warm_up_s = warm_up()
+        log.info("tracking filter ready (q %g m²/s³, σ %g m, %g°) in %.2f s", p.q_mps2,
+                 p.sigma_range_m, p.sigma_angle_deg, self.track_warm_up_s)
 
     def _setup_outputs(self, cfg: ServiceConfig) -> None:
         """Reference path, TLM1 / D/A sinks and CAN air data, as configured; a configuration
@@ -179,6 +198,7 @@ class ServiceState:
             self.archiver = RecordingArchiver(self.cfg.archive_dir, self._archive_options,
                                               backlog=self.recorder.dir.glob("*.rdrlog"))
             self.recorder.on_closed = self.archiver.submit
+        self._warm_up_tracking()
         self.replays.start(loop)
         self.live.start()
 
@@ -196,7 +216,7 @@ class ServiceState:
         """What a new replay session's pipeline is built with: the live spec, site,
         calibration and path deviation — none of the live outputs."""
         return {"spec": self.spec, "site": self.site, "calibration": self.live.calibration,
-                "processors": list(self.extra_processors)}
+                "track": self.track_params, "processors": list(self.extra_processors)}
 
     def begin_shutdown(self) -> None:
         """The first thing of a stop (``serve`` calls it as soon as the server starts to

@@ -344,3 +344,67 @@ def covariance_columns(fP: np.ndarray, rows: np.ndarray, out_cov: np.ndarray) ->
             v = fP[j, a, a]
             out_cov[k, a] = math.sqrt(v) if v > 0.0 else (0.0 if v == 0.0 else math.nan)
         out_cov[k, 6], out_cov[k, 7], out_cov[k, 8] = fP[j, 0, 1], fP[j, 0, 2], fP[j, 1, 2]
+
+
+#: the columns of :func:`velocity_columns`, in order (``*_sigma_*`` are 1σ)
+VELOCITY_COLUMNS = ("vx_mps", "vy_mps", "vh_mps", "gs_mps", "vs_mps", "track_deg", "fpa_deg",
+                    "vx_sigma_mps", "vy_sigma_mps", "vh_sigma_mps", "gs_sigma_mps",
+                    "vs_sigma_mps", "track_sigma_deg", "fpa_sigma_deg")
+
+
+@_jit
+def velocity_columns(fx: np.ndarray, fP: np.ndarray, out: np.ndarray) -> None:
+    """Velocity, ground speed, vertical speed, track and flight-path angle with their 1σ
+    (first-order propagation of the velocity covariance) of each row of ``fx`` / ``fP``
+    into ``out`` (rows × :data:`VELOCITY_COLUMNS`). Track: degrees clockwise from north
+    (X) in [0, 360); vertical speed and flight-path angle positive up. NaN where the row
+    has no estimate; track and its σ NaN at zero ground speed."""
+    r2d = 180.0 / math.pi
+    for j in range(fx.shape[0]):
+        vx, vy, vh = fx[j, 3], fx[j, 4], fx[j, 5]
+        pxx, pxy, pyy = fP[j, 3, 3], fP[j, 3, 4], fP[j, 4, 4]
+        pxh, pyh, phh = fP[j, 3, 5], fP[j, 4, 5], fP[j, 5, 5]
+        g2 = vx * vx + vy * vy
+        gs = math.sqrt(g2)
+        v2 = g2 + vh * vh
+        out[j, 0], out[j, 1], out[j, 2], out[j, 3], out[j, 4] = vx, vy, vh, gs, vh
+        out[j, 7] = math.sqrt(pxx) if pxx >= 0.0 else math.nan
+        out[j, 8] = math.sqrt(pyy) if pyy >= 0.0 else math.nan
+        out[j, 9] = out[j, 11] = math.sqrt(phh) if phh >= 0.0 else math.nan
+        if g2 > 0.0:
+            trk = math.atan2(vy, vx) * r2d
+            out[j, 5] = trk + 360.0 if trk < 0.0 else trk
+            var_gs = (vx * vx * pxx + 2.0 * vx * vy * pxy + vy * vy * pyy) / g2
+            var_trk = (vy * vy * pxx - 2.0 * vx * vy * pxy + vx * vx * pyy) / (g2 * g2)
+            cov_gh = (vx * pxh + vy * pyh) / gs
+            var_fpa = (g2 * phh - 2.0 * gs * vh * cov_gh + vh * vh * var_gs) / (v2 * v2)
+            out[j, 10] = math.sqrt(max(var_gs, 0.0))
+            out[j, 12] = math.sqrt(max(var_trk, 0.0)) * r2d
+            out[j, 13] = math.sqrt(max(var_fpa, 0.0)) * r2d
+        else:
+            out[j, 5] = out[j, 12] = math.nan
+            out[j, 10] = math.sqrt(pxx) if pxx >= 0.0 else math.nan
+            out[j, 13] = math.nan
+        out[j, 6] = math.atan2(vh, gs) * r2d if v2 > 0.0 else math.nan
+
+
+@_jit
+def live_chunk(t: np.ndarray, sr: np.ndarray, el: np.ndarray, az: np.ndarray,
+               good: np.ndarray, n: int, x: np.ndarray, P: np.ndarray, carry: np.ndarray,
+               params: np.ndarray, nis: np.ndarray, flags: np.ndarray, fx: np.ndarray,
+               fP: np.ndarray, out: np.ndarray, fix_rows: np.ndarray, fixes: np.ndarray) -> int:
+    """:func:`forward` over the first ``n`` samples of preallocated buffers, then
+    :func:`velocity_columns` of them into ``out[:n]``, rounded to 1e-4 (m/s, deg);
+    returns the number of outliers. One compiled call per chunk of the live stream."""
+    forward(t, sr, el, az, good, 0, n, x, P, carry, params, nis, flags, fx[:n], fP[:n],
+            fix_rows, fixes)
+    velocity_columns(fx[:n], fP[:n], out[:n])
+    bad = 0
+    for k in range(n):
+        if flags[k] & OUTLIER:
+            bad += 1
+        for c in range(out.shape[1]):  # to 1e-4 (m/s, deg): shorter JSON, faster to encode
+            v = out[k, c]
+            if math.isfinite(v):
+                out[k, c] = math.floor(v * 1e4 + 0.5) / 1e4
+    return bad

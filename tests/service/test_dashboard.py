@@ -64,6 +64,9 @@ def test_dashboard_track_lamps_stale_and_recovery(tmp_path, browser):  # noqa: F
         assert chrome.eval("document.getElementById('lamp-rx_good').classList.contains('on')")
         assert chrome.eval("document.getElementById('stale').hidden")
         assert chrome.eval("document.getElementById('r-sr').textContent") not in ("—", "")
+        # the tracking filter's readouts: a ground speed with its σ
+        chrome.wait_for("document.getElementById('k-gs-s').textContent.startsWith('± ')")
+        assert chrome.eval("document.getElementById('k-gs').textContent") not in ("—", "")
         chrome.wait_for("(r => r > 150 && r < 260)(parseFloat(document.getElementById('c-rate')"
                         ".textContent))")  # the writer's ~200 frames/s
         # something was drawn on the plan view: the canvas is not blank

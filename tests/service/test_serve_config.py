@@ -71,14 +71,14 @@ def test_the_example_config_has_every_key_and_each_is_valid(tmp_path):
     from radar_io.service.config import ServiceConfig
 
     text = (Path(__file__).resolve().parents[2] / "deploy" / "config.example.toml").read_text()
-    on = re.sub(r"^# ?([a-z_]+ = .*)$", r"\1", text, flags=re.M)   # `# key = value` → on
+    on = re.sub(r"^# ?([a-z0-9_]+ = .*)$", r"\1", text, flags=re.M)   # `# key = value` → on
     on = re.sub(r"^# ?(\[\[alarms\]\])$", r"\1", on, flags=re.M)
     on = re.sub(r"^# ?((column|min|max|for_s|name) = .*)$", r"\1", on, flags=re.M)
     p = tmp_path / "all.toml"
     p.write_text(on)
     cfg = load_config(str(p), {})
     keys = {f.name for f in dataclasses.fields(ServiceConfig)}
-    shown = set(re.findall(r"^([a-z_]+) = ", on, flags=re.M)) | {"alarms"}
+    shown = set(re.findall(r"^([a-z0-9_]+) = ", on, flags=re.M)) | {"alarms"}
     assert keys <= shown, sorted(keys - shown)
     assert cfg.publish.startswith("mqtts://") and cfg.alarms[0]["column"] == "dz_m"
 

@@ -11,6 +11,24 @@ function setBar(id, v, fullScale) {
   val.textContent = fmt(v, id === "dsr" ? 2 : 4);
 }
 
+/** Value and "± σ" of a tracking-filter field (— without a track). */
+function setKin(id, v, sigma, digits) {
+  $("k-" + id).textContent = fmt(v, digits);
+  $("k-" + id + "-s").textContent = v === null || v === undefined || sigma === null || sigma === undefined
+    ? "" : "± " + fmt(sigma, digits);
+}
+
+/** The tracking filter's ground speed, vertical speed, flight-path angle, track and (with a
+ * reference path) glide-path angle error, each ± 1σ. */
+function renderKinematics(m) {
+  setKin("gs", m.gs_mps, m.gs_sigma_mps, 1);
+  setKin("vs", m.vs_mps, m.vs_sigma_mps, 1);
+  setKin("fpa", m.fpa_deg, m.fpa_sigma_deg, 2);
+  setKin("trk", m.track_deg, m.track_sigma_deg, 1);
+  $("k-gpa-row").hidden = m.gpa_err_deg === undefined;
+  setKin("gpa", m.gpa_err_deg, m.gpa_err_sigma_deg, 2);
+}
+
 /** The last message's lamps and values (corrected SR'/EL'/AZ' when RX GOOD). */
 export function renderMessage(m, stale) {
   for (const k of ["go", "rx_good", "sync", "auto"]) $("lamp-" + k).classList.toggle("on", !!(m && m[k]) && !stale);
@@ -24,6 +42,7 @@ export function renderMessage(m, stale) {
   setBar("dsr", m.dsr_m, 50); setBar("del", m.del_deg, 1); setBar("daz", m.daz_deg, 1);
   $("r-dy").textContent = fmt(m.dy_m, 1); $("r-dz").textContent = fmt(m.dz_m, 1);
   $("r-along").textContent = fmt(m.along_m, 0); $("r-leg").textContent = m.leg === undefined ? "—" : m.leg;
+  renderKinematics(m);
 }
 
 /** The latest CAN air-data sample. */
