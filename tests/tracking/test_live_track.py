@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import timing_bound
+
 from radar_io.coordinates.deviation import DeviationProcessor
 from radar_io.coordinates.reference_path import ReferencePath
 from radar_io.decoding.measurement import MeasurementBatch
