@@ -16,6 +16,7 @@ sessions of their own (:mod:`radar_io.service.sessions`).
 from __future__ import annotations
 
 import asyncio
+import gc
 import logging
 import re
 import secrets
@@ -130,6 +131,12 @@ class ServiceState:
 
         p = self.track_params
         self.track_warm_up_s = warm_up()
+        # numba and its compiled kernels add several hundred thousand long-lived objects;
+        # a full garbage collection walking them all would stop every thread (the reader
+        # included) for ~100 ms now and then: everything alive at start-up is frozen out of
+        # the collector's generations (it is never garbage anyway)
+        gc.collect()
+        gc.freeze()
         log.info("tracking filter ready (q %g m²/s³, σ %g m, %g°) in %.2f s", p.q_mps2,
                  p.sigma_range_m, p.sigma_angle_deg, self.track_warm_up_s)
 

@@ -30,9 +30,13 @@ def warm_up() -> float:
     t0 = time.perf_counter()
     tr = LiveTracker(TrackParams())
     n = 4
-    t = 0.001 * np.arange(n)
-    tr.columns(t, np.full(n, 1.0e4), np.full(n, 0.05), np.full(n, 0.3),
-               np.array([1, 1, 0, 1], dtype=np.uint8))
+    ones = np.ones(n, dtype=np.uint8)
+    # every path a live stream can take: a start, an NG frame, NG only, a gap that restarts
+    # the track, the TOD wrapping at midnight
+    for t0_s, good in ((0.0, np.array([1, 1, 0, 1], dtype=np.uint8)), (0.004, 0 * ones),
+                       (60.0, ones), (86_399.999, ones)):
+        t = (t0_s + 0.001 * np.arange(n)) % 86_400.0
+        tr.columns(t, np.full(n, 1.0e4), np.full(n, 0.05), np.full(n, 0.3), good)
     return time.perf_counter() - t0
 
 

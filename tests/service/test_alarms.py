@@ -253,7 +253,8 @@ def test_report_endpoint_html_and_pdf(svc):
     time.sleep(1.0)
     code, ctype, body = _call(svc, "GET", f"/api/recordings/{rid}/report")
     assert code == 200 and ctype.startswith("text/html")
-    assert body.count(b"data:image/png;base64,") == 4 and b"Sync events (" in body
+    # the flight figures (4) and the best-estimate-of-trajectory page's (3)
+    assert body.count(b"data:image/png;base64,") == 7 and b"Sync events (" in body
     code, ctype, body = _call(svc, "GET", f"/api/recordings/{rid}/report?format=pdf")
     assert code == 200 and ctype == "application/pdf" and body.startswith(b"%PDF-")
     assert _call(svc, "GET", f"/api/recordings/{rid}/report?format=doc")[0] == 422
