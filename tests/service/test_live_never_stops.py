@@ -412,9 +412,9 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
         wait_for(lambda: svc.get("/api/status")["frames"] >= sent, timeout_s=30,
                  what="the last live frames")
         time.sleep(0.5)  # the outputs' queues drain
+        seen = watch.stop()  # before the recording is stopped on purpose, just below
         code, doc = call(svc.base, "POST", "/api/recordings/stop")
         assert code == 200 and doc["closed"] == rec
-        seen = watch.stop()
         status = svc.get("/api/status")
         sync_events = svc.get("/api/sync-events?limit=100000")
         live_msgs, msgs_a, msgs_b = live_ws.stop(), replay_a.stop(), replay_b.stop()
@@ -484,8 +484,8 @@ def test_figure_two_replays_beside_a_1_khz_live_flight(tmp_path):
     }
     print("\nissue 19 figure 1:", json.dumps(figures, indent=1))
     assert seqs.tolist() == list(range(sent)) and missing == 0
-    assert len(seen) >= 4 * run_s * 0.5 and all(
-        c and s == source and n == 0 and r == rec for c, s, n, r in seen)
+    odd = [x for x in seen if not (x[0] and x[1] == source and x[2] == 0 and x[3] == rec)]
+    assert len(seen) >= 4 * run_s * 0.5 and not odd, (rec, odd)
     assert status["seq_gaps"] == 0 and status["crc_errors"] == 0 and status["reconnects"] == 0
     assert len(tlm_xr) > 100 and tlm_replayed == 0
     assert len(ast["sr_m"]) > 1000 and ast_replayed == 0 and (ast["sim"] == 0).all()
