@@ -55,6 +55,25 @@ _skipped: list[str] = []
 
 
 
+#: in-process tests of tests/service/ (no server, browser or child process): in the fast subset
+SERVICE_UNIT_MODULES = frozenset({"test_fanout_unit.py", "test_history.py", "test_limits_unit.py",
+                                  "test_pipeline.py"})
+#: other modules that start a service, a broker, a browser, tshark, a JVM or the CLI per case
+SLOW_MODULES = frozenset({"test_spark.py", "test_mqtt.py", "test_asterix.py", "test_report.py",
+                          "test_ch10_export.py", "test_track_cli.py", "test_end_to_end.py"})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Every test that runs real servers, browsers or outside programs is ``slow``: the
+    development subset ``pytest -m "not slow"`` leaves them out (CI runs everything)."""
+    slow = pytest.mark.slow
+    for item in items:
+        path = Path(str(item.fspath))
+        in_service = path.parent.name == "service" and path.name not in SERVICE_UNIT_MODULES
+        if in_service or path.name in SLOW_MODULES:
+            item.add_marker(slow)
+
+
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     if report.skipped and not hasattr(report, "wasxfail"):   # an expected failure is no skip
         _skipped.append(report.nodeid)
