@@ -35,7 +35,7 @@ def read_back(recording: str | Path, ch10: str | Path) -> dict[str, Any]:
 
     Raises ValidationError at the first disagreement (naming the packet)."""
     # a test dependency, installed by the README's test command (--no-deps pychapter10)
-    from chapter10 import C10  # type: ignore[import-untyped]
+    from chapter10 import C10
 
     from radar_io.recording.rdrlog import RecordingReader
 
