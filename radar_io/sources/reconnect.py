@@ -44,9 +44,9 @@ class ReconnectingSource:
     def url(self) -> str:
         return self.source.url
 
-    def _down(self, exc: BaseException) -> None:
+    def _down(self, exc: BaseException, logged: bool = False) -> None:
         why = describe(exc)
-        if self.connected or self.last_error != why:
+        if not logged and (self.connected or self.last_error != why):
             log.warning("source %s: %s", self.source.url, why)
         self.connected = False
         self.last_error = why
@@ -65,9 +65,12 @@ class ReconnectingSource:
         try:
             data = self.source.read(timeout_s)
         except Exception as exc:  # noqa: BLE001
+            # the reason first: a status read meanwhile never shows a drop without it
+            self.last_error = describe(exc)
+            log.warning("source %s: %s", self.source.url, self.last_error)
             self.close()
             self.reconnects += 1
-            self._down(exc)
+            self._down(exc, logged=True)
             return b""
         if data:
             self._delay = self.backoff_s[0]
